@@ -1,0 +1,4 @@
+"""pseudolight estimator: texture map and pseudo illumination from multiple views.
+
+Math on in-memory arrays only: no file formats, no CLI, no plotting.
+"""

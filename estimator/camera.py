@@ -1,0 +1,139 @@
+"""Camera conventions: the one module that converts between them.
+
+Dataset cameras are pinhole cameras with a camera-to-world matrix in the
+OpenGL convention (camera +X right, +Y up, looking down -Z), as in nerfstudio's
+``transforms.json``. Mitsuba's camera space is +X left, +Y up, +Z forward, and
+OpenCV/COLMAP's is +X right, +Y down, +Z forward:
+
+    c2w_gl = to_world_mitsuba @ diag(-1, 1, -1, 1)
+    c2w_cv = c2w_gl @ diag(1, -1, -1, 1)
+
+Pixel coordinates are continuous: pixel (col i, row j) covers [i, i+1) x [j, j+1)
+with its centre at (i + 0.5, j + 0.5); row 0 is the top of the image.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_GL_FROM_MITSUBA = np.diag([-1.0, 1.0, -1.0, 1.0])
+_CV_FROM_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def mitsuba_to_gl(to_world: np.ndarray) -> np.ndarray:
+    """Mitsuba sensor ``to_world`` (4, 4) -> OpenGL camera-to-world (4, 4)."""
+    return np.asarray(to_world, dtype=np.float64) @ _GL_FROM_MITSUBA
+
+
+def gl_to_mitsuba(c2w_gl: np.ndarray) -> np.ndarray:
+    """OpenGL camera-to-world (4, 4) -> Mitsuba sensor ``to_world`` (4, 4)."""
+    return np.asarray(c2w_gl, dtype=np.float64) @ _GL_FROM_MITSUBA
+
+
+def gl_to_opencv(c2w_gl: np.ndarray) -> np.ndarray:
+    """OpenGL camera-to-world (4, 4) -> OpenCV/COLMAP camera-to-world (4, 4)."""
+    return np.asarray(c2w_gl, dtype=np.float64) @ _CV_FROM_GL
+
+
+def opencv_to_gl(c2w_cv: np.ndarray) -> np.ndarray:
+    """OpenCV/COLMAP camera-to-world (4, 4) -> OpenGL camera-to-world (4, 4)."""
+    return np.asarray(c2w_cv, dtype=np.float64) @ _CV_FROM_GL
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 1.0, 0.0)) -> np.ndarray:
+    """OpenGL camera-to-world (4, 4) of a camera at ``eye`` looking at ``target``.
+
+    When ``up`` is parallel to the view direction, world +Z (or +X) is used instead.
+    """
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    forward = target - eye
+    forward /= np.linalg.norm(forward)
+    for candidate in (up, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])):
+        right = np.cross(forward, candidate)
+        if np.linalg.norm(right) > 1e-6:
+            break
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    c2w = np.eye(4)
+    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, true_up, -forward, eye
+    return c2w
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera.
+
+    Attributes
+    ----------
+    c2w : (4, 4) float64, OpenGL camera-to-world.
+    fx, fy : focal lengths in pixels.
+    cx, cy : principal point in pixels (continuous coordinates, see module doc).
+    width, height : image size in pixels.
+    """
+
+    c2w: np.ndarray
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def __post_init__(self):
+        c2w = np.asarray(self.c2w, dtype=np.float64)
+        if c2w.shape != (4, 4) or not np.all(np.isfinite(c2w)):
+            raise ValueError(f"camera c2w must be a finite 4x4 matrix, got shape {c2w.shape}")
+        if min(self.width, self.height) < 1 or min(self.fx, self.fy) <= 0:
+            raise ValueError(f"camera needs positive size and focal length, got "
+                             f"{self.width}x{self.height}, fx={self.fx}, fy={self.fy}")
+        object.__setattr__(self, "c2w", c2w)
+
+    @classmethod
+    def from_fov(cls, c2w: np.ndarray, fov_x_deg: float, width: int, height: int) -> "Camera":
+        """Square-pixel camera with the principal point at the image centre."""
+        if not 0.0 < fov_x_deg < 180.0:
+            raise ValueError(f"fov_x must lie in (0, 180) degrees, got {fov_x_deg}")
+        f = 0.5 * width / np.tan(0.5 * np.radians(fov_x_deg))
+        return cls(c2w, f, f, 0.5 * width, 0.5 * height, int(width), int(height))
+
+    @property
+    def fov_x_deg(self) -> float:
+        return float(np.degrees(2.0 * np.arctan(0.5 * self.width / self.fx)))
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) camera position in world space."""
+        return self.c2w[:3, 3]
+
+    def pixel_rays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rays through every pixel centre, row-major from the top-left.
+
+        Returns
+        -------
+        origins : (H*W, 3) float64
+        directions : (H*W, 3) float64, unit length, world space.
+        """
+        cols, rows = np.meshgrid(np.arange(self.width) + 0.5, np.arange(self.height) + 0.5)
+        d_cam = np.stack([(cols.ravel() - self.cx) / self.fx,
+                          -(rows.ravel() - self.cy) / self.fy,
+                          -np.ones(cols.size)], axis=1)
+        d = d_cam @ self.c2w[:3, :3].T
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return np.broadcast_to(self.center, d.shape).copy(), d
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points (N, 3) to continuous pixel coordinates.
+
+        Returns
+        -------
+        xy : (N, 2) float64, (column, row) coordinates.
+        depth : (N,) float64, distance along the viewing axis (> 0 in front).
+        """
+        w2c = np.linalg.inv(self.c2w)
+        p = np.asarray(points, dtype=np.float64) @ w2c[:3, :3].T + w2c[:3, 3]
+        depth = -p[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = self.fx * p[:, 0] / depth + self.cx
+            y = -self.fy * p[:, 1] / depth + self.cy
+        return np.stack([x, y], axis=1), depth

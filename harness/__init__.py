@@ -1,0 +1,1 @@
+"""pseudolight harness: dataset I/O, scenes -> Mitsuba, rendering, the CLI."""

@@ -1,0 +1,34 @@
+"""Reading image assets (PNG/JPEG textures, Radiance .hdr probes) as linear float arrays."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from estimator import backend
+
+from .exr import read_exr
+
+
+def read_linear_rgb(path: str | os.PathLike) -> np.ndarray:
+    """Any image Mitsuba reads (PNG, JPEG, HDR, EXR) as linear Rec.709 float32 (H, W, 3).
+
+    8-bit images are taken as sRGB-encoded and linearised.
+    """
+    path = str(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"image file not found: {path}")
+    if path.lower().endswith(".exr"):
+        return read_exr(path)[..., :3]
+    mi = backend.set_variant()
+    try:
+        bitmap = mi.Bitmap(path)
+    except Exception as exc:
+        raise ValueError(f"cannot read image {path}: {exc}") from exc
+    linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+    image = np.array(linear, dtype=np.float32)
+    if image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=2)
+    if not np.all(np.isfinite(image)):
+        raise ValueError(f"image {path} contains NaN or Inf pixels")
+    return image

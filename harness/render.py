@@ -1,0 +1,123 @@
+"""Scenes -> Mitsuba, and rendering of calibrated views."""
+from __future__ import annotations
+
+import numpy as np
+from tqdm import tqdm
+
+from estimator import backend
+from estimator.camera import Camera, gl_to_mitsuba, look_at
+from estimator.data import TriangleMesh
+from estimator.raycast import mitsuba_mesh
+from estimator.sh import axis_angle_matrix, fibonacci_sphere
+
+from . import direct_integrator, phong_bsdf
+from .illumination import Illumination
+from .scene_spec import CameraSpec
+
+
+def camera_positions(spec: CameraSpec, test: bool = False) -> np.ndarray:
+    """(N, 3) camera centres around the origin for the training or the test views.
+
+    'fibonacci' spreads them uniformly over the sphere of radius ``distance``;
+    test views use a rotated lattice so they fall between training views.
+    'ring' places them at ``elevation`` degrees, evenly in azimuth (test views
+    offset by half a step).
+    """
+    n = spec.test_count if test else spec.count
+    if n == 0:
+        return np.zeros((0, 3))
+    if spec.distribution == "fibonacci":
+        if n < 4:
+            pts = fibonacci_sphere(4)[:n]
+        else:
+            pts = fibonacci_sphere(n)
+        if test:
+            pts = pts @ (axis_angle_matrix("y", 23.0) @ axis_angle_matrix("x", 11.0)).T
+    else:
+        az = 2 * np.pi * (np.arange(n) + (0.5 if test else 0.0)) / n
+        el = np.radians(spec.elevation)
+        pts = np.stack([np.cos(el) * np.sin(az), np.full(n, np.sin(el)), np.cos(el) * np.cos(az)], axis=1)
+    return spec.distance * pts
+
+
+def make_cameras(spec: CameraSpec, test: bool = False) -> list[Camera]:
+    """Cameras looking at the origin (world +Y up) with the spec's resolution and fov."""
+    return [Camera.from_fov(look_at(p, np.zeros(3)), spec.fov, spec.width, spec.height)
+            for p in camera_positions(spec, test)]
+
+
+def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, exponent: float,
+                illumination: Illumination, camera: Camera, spp: int, integrator: str = "direct",
+                max_depth: int = 6):
+    """A Mitsuba scene: the mesh with per-face Phong albedos, the lights, one sensor.
+
+    Parameters
+    ----------
+    diffuse, specular : (F, 3) per-face linear albedo.
+    integrator : 'direct' (deterministic loop over delta lights) or 'path'.
+    """
+    mi = backend.set_variant()
+    phong_bsdf.register()
+    direct_integrator.register()
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict({
+        "type": phong_bsdf.PLUGIN_NAME, "exponent": float(exponent),
+        "diffuse_reflectance": {"type": "mesh_attribute", "name": "face_diffuse"},
+        "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular"},
+    })
+    m = mitsuba_mesh(mesh, "object", props=props)
+    m.add_attribute("face_diffuse", 3, mi.Float(np.asarray(diffuse, np.float32).ravel()))
+    m.add_attribute("face_specular", 3, mi.Float(np.asarray(specular, np.float32).ravel()))
+    if integrator == "direct":
+        if not illumination.is_delta:
+            raise ValueError("the direct integrator needs delta lights; use 'path' for an envmap")
+        integ = {"type": direct_integrator.PLUGIN_NAME}
+    else:
+        integ = {"type": "path", "max_depth": int(max_depth), "hide_emitters": True}
+    scene = {
+        "type": "scene",
+        "embree_use_robust_intersections": True,
+        "integrator": integ,
+        "object": m,
+        "sensor": _sensor_dict(mi, camera, spp),
+    }
+    scene.update(illumination.mitsuba_emitters(mi))
+    return mi.load_dict(scene)
+
+
+def _sensor_dict(mi, camera: Camera, spp: int) -> dict:
+    if abs(camera.fx - camera.fy) > 1e-6 * camera.fx:
+        raise ValueError("rendering needs square pixels (fl_x == fl_y)")
+    return {
+        "type": "perspective",
+        "fov_axis": "x",
+        "fov": camera.fov_x_deg,
+        "principal_point_offset_x": (camera.cx - 0.5 * camera.width) / camera.width,
+        "principal_point_offset_y": (camera.cy - 0.5 * camera.height) / camera.height,
+        "near_clip": 1e-3,
+        "far_clip": 1e5,
+        "to_world": mi.ScalarTransform4f(gl_to_mitsuba(camera.c2w)),
+        "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
+                 "pixel_format": "rgba", "rfilter": {"type": "box"}},
+        "sampler": {"type": "multijitter", "sample_count": int(spp)},
+    }
+
+
+def render_views(scene, cameras: list[Camera], spp: int, seed: int = 0, desc: str = "render") -> list[np.ndarray]:
+    """Render each camera (same intrinsics as the scene's sensor) -> list of (H, W, 4) float32 RGBA.
+
+    The sensor pose is updated in place, so Dr.Jit compiles the kernel once.
+    """
+    mi = backend.set_variant()
+    params = mi.traverse(scene)
+    sensor = scene.sensors()[0]
+    size = tuple(sensor.film().size())
+    images = []
+    for index, cam in enumerate(tqdm(cameras, desc=desc, unit="view", leave=False)):
+        if (cam.width, cam.height) != size:
+            raise ValueError(f"camera {index} is {cam.width}x{cam.height}, the film is {size[0]}x{size[1]}")
+        params["sensor.to_world"] = mi.ScalarTransform4f(gl_to_mitsuba(cam.c2w))
+        params.update()
+        image = mi.render(scene, spp=spp, seed=seed * 100003 + index)
+        images.append(np.array(image, dtype=np.float32))
+    return images

@@ -1,0 +1,362 @@
+"""Scene specs: TOML files validated into typed dataclasses.
+
+Every unknown key, missing asset and out-of-range value is refused with a
+:class:`SpecError` that names the key (``section.key``) or the file.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import os
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any
+
+
+class SpecError(ValueError):
+    """A scene spec that cannot be used; the message names the key or file."""
+
+
+def _check_keys(where: str, raw: dict, cls) -> None:
+    if not isinstance(raw, dict):
+        raise SpecError(f"{where} must be a table, got {type(raw).__name__}")
+    allowed = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(raw) - allowed)
+    if unknown:
+        raise SpecError(f"unknown key{'s' if len(unknown) > 1 else ''} "
+                        f"{', '.join(f'{where}.{k}' for k in unknown)} (allowed: {', '.join(sorted(allowed))})")
+
+
+def _num(where: str, value, lo=None, hi=None, integer=False, lo_open=False) -> float:
+    ok_type = isinstance(value, int) if integer else isinstance(value, (int, float))
+    if isinstance(value, bool) or not ok_type:
+        raise SpecError(f"{where} must be {'an integer' if integer else 'a number'}, got {value!r}")
+    if lo is not None and (value <= lo if lo_open else value < lo):
+        raise SpecError(f"{where} must be {'>' if lo_open else '>='} {lo}, got {value}")
+    if hi is not None and value > hi:
+        raise SpecError(f"{where} must be <= {hi}, got {value}")
+    return value
+
+
+def _vec(where: str, value, n=3, nonneg=False, nonzero=False) -> list[float]:
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and n == 3 and not nonzero:
+        value = [float(value)] * 3
+    if not isinstance(value, list) or len(value) != n or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise SpecError(f"{where} must be a list of {n} numbers, got {value!r}")
+    if nonneg and min(value) < 0:
+        raise SpecError(f"{where} must be non-negative, got {value}")
+    if nonzero and not any(value):
+        raise SpecError(f"{where} must not be the zero vector")
+    return [float(v) for v in value]
+
+
+def _choice(where: str, value, options) -> str:
+    if value not in options:
+        raise SpecError(f"{where} must be one of {', '.join(map(repr, options))}, got {value!r}")
+    return value
+
+
+def _asset(where: str, value, base_dir: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise SpecError(f"{where} must be a file path, got {value!r}")
+    path = value if os.path.isabs(value) else os.path.normpath(os.path.join(base_dir, value))
+    if not os.path.isfile(path):
+        raise SpecError(f"{where}: file not found: {path}")
+    return path
+
+
+@dataclass
+class GeometrySpec:
+    type: str = "icosphere"
+    subdivisions: int = 4
+    radius: float = 1.0
+    lobes: int = 4
+    depth: float = 0.3
+    file: str | None = None
+
+    def validate(self, base_dir: str) -> None:
+        _choice("geometry.type", self.type, ("icosphere", "blob", "mesh"))
+        _num("geometry.subdivisions", self.subdivisions, 0, 7, integer=True)
+        _num("geometry.radius", self.radius, 0, lo_open=True)
+        _num("geometry.lobes", self.lobes, 1, 16, integer=True)
+        _num("geometry.depth", self.depth, 0, 0.9)
+        if self.type == "mesh":
+            self.file = _asset("geometry.file", self.file, base_dir)
+        elif self.file is not None:
+            raise SpecError(f"geometry.file is only for geometry.type = 'mesh', not {self.type!r}")
+
+
+@dataclass
+class AlbedoSpec:
+    value: list[float] | None = None
+    texture: str | None = None
+    scale: float = 1.0
+
+    def validate(self, where: str, base_dir: str) -> None:
+        if (self.value is None) == (self.texture is None):
+            raise SpecError(f"{where} needs exactly one of 'value' (RGB) or 'texture' (image file)")
+        if self.value is not None:
+            self.value = _vec(f"{where}.value", self.value, nonneg=True)
+        else:
+            self.texture = _asset(f"{where}.texture", self.texture, base_dir)
+        _num(f"{where}.scale", self.scale, 0)
+
+
+@dataclass
+class RegionSpec:
+    name: str = ""
+    diffuse: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    specular: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    axis: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])
+    ranges: list[list[float]] = field(default_factory=list)
+
+    def validate(self, where: str) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SpecError(f"{where}.name must be a non-empty string")
+        self.diffuse = _vec(f"{where}.diffuse", self.diffuse, nonneg=True)
+        self.specular = _vec(f"{where}.specular", self.specular, nonneg=True)
+        self.axis = _vec(f"{where}.axis", self.axis, nonzero=True)
+        if not isinstance(self.ranges, list):
+            raise SpecError(f"{where}.ranges must be a list of [lo, hi] pairs")
+        self.ranges = [_vec(f"{where}.ranges[{i}]", r, n=2) for i, r in enumerate(self.ranges)]
+        for i, (lo, hi) in enumerate(self.ranges):
+            if not -1.0 <= lo <= hi <= 1.0:
+                raise SpecError(f"{where}.ranges[{i}] must satisfy -1 <= lo <= hi <= 1, got {[lo, hi]}")
+
+
+@dataclass
+class MaterialSpec:
+    model: str = "phong"
+    exponent: float = 10.0
+    diffuse: AlbedoSpec | None = None
+    specular: AlbedoSpec | None = None
+    regions: list[RegionSpec] = field(default_factory=list)
+
+    def validate(self, base_dir: str) -> None:
+        _choice("material.model", self.model, ("phong",))
+        _num("material.exponent", self.exponent, 0, 10000, lo_open=True)
+        if self.regions:
+            if self.diffuse is not None or self.specular is not None:
+                raise SpecError("material.regions cannot be combined with material.diffuse/specular")
+            for i, region in enumerate(self.regions):
+                region.validate(f"material.regions[{i}]")
+        else:
+            self.diffuse = self.diffuse or AlbedoSpec(value=[0.0, 0.0, 0.0])
+            self.specular = self.specular or AlbedoSpec(value=[0.0, 0.0, 0.0])
+            self.diffuse.validate("material.diffuse", base_dir)
+            self.specular.validate("material.specular", base_dir)
+
+
+@dataclass
+class LightSpec:
+    to_light: list[float] | None = None
+    irradiance: Any = 1.0
+    position: list[float] | None = None
+    intensity: Any = 1.0
+
+
+@dataclass
+class IlluminationSpec:
+    type: str = "directional"
+    lights: list[LightSpec] = field(default_factory=list)
+    file: str | None = None
+    count: int = 40
+    white: bool = True
+    scale: float = 1.0
+
+    def validate(self, base_dir: str) -> None:
+        kinds = ("directional", "point", "probe-clustered", "envmap")
+        _choice("illumination.type", self.type, kinds)
+        _num("illumination.scale", self.scale, 0, lo_open=True)
+        if self.type in ("directional", "point"):
+            if not self.lights:
+                raise SpecError(f"illumination.lights must list at least one {self.type} light")
+            for i, light in enumerate(self.lights):
+                where = f"illumination.lights[{i}]"
+                if self.type == "directional":
+                    if light.position is not None or light.to_light is None:
+                        raise SpecError(f"{where}: a directional light needs 'to_light' (and no 'position')")
+                    light.to_light = _vec(f"{where}.to_light", light.to_light, nonzero=True)
+                    light.irradiance = _vec(f"{where}.irradiance", light.irradiance, nonneg=True)
+                else:
+                    if light.to_light is not None or light.position is None:
+                        raise SpecError(f"{where}: a point light needs 'position' (and no 'to_light')")
+                    light.position = _vec(f"{where}.position", light.position)
+                    light.intensity = _vec(f"{where}.intensity", light.intensity, nonneg=True)
+        elif self.lights:
+            raise SpecError(f"illumination.lights is not used by illumination.type = {self.type!r}")
+        if self.type in ("probe-clustered", "envmap"):
+            self.file = _asset("illumination.file", self.file, base_dir)
+        elif self.file is not None:
+            raise SpecError(f"illumination.file is not used by illumination.type = {self.type!r}")
+        _num("illumination.count", self.count, 1, 1000, integer=True)
+        if not isinstance(self.white, bool):
+            raise SpecError(f"illumination.white must be true or false, got {self.white!r}")
+
+    @property
+    def is_delta(self) -> bool:
+        return self.type in ("directional", "point", "probe-clustered")
+
+
+@dataclass
+class CameraSpec:
+    count: int = 24
+    test_count: int = 4
+    distribution: str = "fibonacci"
+    distance: float = 4.0
+    fov: float = 35.0
+    width: int = 256
+    height: int = 256
+    elevation: float = 20.0
+
+    def validate(self) -> None:
+        _num("cameras.count", self.count, 1, 10000, integer=True)
+        _num("cameras.test_count", self.test_count, 0, 10000, integer=True)
+        _choice("cameras.distribution", self.distribution, ("fibonacci", "ring"))
+        _num("cameras.distance", self.distance, 0, lo_open=True)
+        _num("cameras.fov", self.fov, 1, 170)
+        _num("cameras.width", self.width, 8, 8192, integer=True)
+        _num("cameras.height", self.height, 8, 8192, integer=True)
+        _num("cameras.elevation", self.elevation, -89, 89)
+
+
+@dataclass
+class RenderSpec:
+    spp: int = 4
+    integrator: str = "auto"
+    max_depth: int = 6
+    half: bool = False
+
+    def validate(self, illumination: IlluminationSpec) -> None:
+        _num("render.spp", self.spp, 1, 65536, integer=True)
+        _choice("render.integrator", self.integrator, ("auto", "direct", "path"))
+        _num("render.max_depth", self.max_depth, 2, 64, integer=True)
+        if self.integrator == "direct" and not illumination.is_delta:
+            raise SpecError(f"render.integrator = 'direct' needs delta lights; "
+                            f"illumination.type = {illumination.type!r} needs 'path'")
+
+    def resolved_integrator(self, illumination: IlluminationSpec) -> str:
+        if self.integrator != "auto":
+            return self.integrator
+        return "direct" if illumination.is_delta else "path"
+
+
+@dataclass
+class SceneSpec:
+    name: str
+    description: str = ""
+    seed: int = 0
+    geometry: GeometrySpec = field(default_factory=GeometrySpec)
+    material: MaterialSpec = field(default_factory=MaterialSpec)
+    illumination: IlluminationSpec = field(default_factory=IlluminationSpec)
+    cameras: CameraSpec = field(default_factory=CameraSpec)
+    render: RenderSpec = field(default_factory=RenderSpec)
+    profiles: dict = field(default_factory=dict)
+    path: str | None = None
+
+
+def _build(where: str, raw: dict, cls):
+    _check_keys(where, raw, cls)
+    return cls(**raw)
+
+
+def apply_overrides(raw: dict, overrides: dict[str, Any]) -> dict:
+    """Copy of ``raw`` with dotted keys set, e.g. {'cameras.width': 64}."""
+    out = copy.deepcopy(raw)
+    for dotted, value in overrides.items():
+        node = out
+        *parents, leaf = dotted.split(".")
+        for key in parents:
+            node = node.setdefault(key, {})
+            if not isinstance(node, dict):
+                raise SpecError(f"override {dotted}: {key} is not a table")
+        node[leaf] = value
+    return out
+
+
+def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
+               overrides: dict[str, Any] | None = None) -> SceneSpec:
+    """Validate a raw spec (a dict as read from TOML) into a :class:`SceneSpec`.
+
+    Parameters
+    ----------
+    base_dir : folder that relative asset paths are resolved against.
+    profile : name of a table under ``[profiles]`` whose dotted keys override the spec.
+    overrides : further dotted-key overrides, applied last.
+    """
+    _check_keys("spec", raw, SceneSpec)
+    if "name" not in raw or not isinstance(raw["name"], str) or not raw["name"]:
+        raise SpecError("spec.name is missing (a non-empty string)")
+    profiles = raw.get("profiles", {})
+    if profile is not None:
+        if profile not in profiles:
+            raise SpecError(f"profile {profile!r} not found; the spec has {sorted(profiles) or 'none'}")
+        raw = apply_overrides(raw, profiles[profile])
+    if overrides:
+        raw = apply_overrides(raw, overrides)
+    mat = dict(raw.get("material", {}))
+    _check_keys("material", mat, MaterialSpec)
+    for key in ("diffuse", "specular"):
+        if key in mat:
+            mat[key] = _build(f"material.{key}", mat[key], AlbedoSpec)
+    mat["regions"] = [_build(f"material.regions[{i}]", r, RegionSpec) for i, r in enumerate(mat.get("regions", []))]
+    ill = dict(raw.get("illumination", {}))
+    _check_keys("illumination", ill, IlluminationSpec)
+    ill["lights"] = [_build(f"illumination.lights[{i}]", r, LightSpec) for i, r in enumerate(ill.get("lights", []))]
+    spec = SceneSpec(
+        name=raw["name"],
+        description=raw.get("description", ""),
+        seed=_num("spec.seed", raw.get("seed", 0), 0, integer=True),
+        geometry=_build("geometry", raw.get("geometry", {}), GeometrySpec),
+        material=MaterialSpec(**mat),
+        illumination=IlluminationSpec(**ill),
+        cameras=_build("cameras", raw.get("cameras", {}), CameraSpec),
+        render=_build("render", raw.get("render", {}), RenderSpec),
+        profiles=profiles,
+    )
+    spec.geometry.validate(base_dir)
+    spec.material.validate(base_dir)
+    spec.illumination.validate(base_dir)
+    spec.cameras.validate()
+    spec.render.validate(spec.illumination)
+    return spec
+
+
+def load_spec(path: str | os.PathLike, profile: str | None = None,
+              overrides: dict[str, Any] | None = None) -> SceneSpec:
+    """Read and validate a scene spec TOML file."""
+    path = str(path)
+    if not os.path.isfile(path):
+        raise SpecError(f"scene spec not found: {path}")
+    try:
+        with open(path, "rb") as f:
+            raw = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{path} is not valid TOML: {exc}") from exc
+    spec = parse_spec(raw, os.path.dirname(os.path.abspath(path)), profile, overrides)
+    spec.path = os.path.abspath(path)
+    return spec
+
+
+SCENES_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+
+
+def shipped_scenes() -> dict[str, str]:
+    """Name -> path of the scene specs shipped in ``scenes/``."""
+    out = {}
+    for entry in sorted(os.listdir(SCENES_DIR)):
+        if entry.endswith(".toml"):
+            out[entry[:-5]] = os.path.join(SCENES_DIR, entry)
+    return out
+
+
+def resolve_scene(name_or_path: str) -> str:
+    """A shipped scene name or a TOML path -> path."""
+    if os.path.isfile(name_or_path):
+        return name_or_path
+    scenes = shipped_scenes()
+    if name_or_path in scenes:
+        return scenes[name_or_path]
+    raise SpecError(f"no scene spec file or shipped scene named {name_or_path!r} "
+                    f"(shipped: {', '.join(scenes)})")

@@ -1,0 +1,65 @@
+"""Per-face albedo from textures, constants and regions."""
+from __future__ import annotations
+
+import numpy as np
+
+from estimator import latlong
+from estimator.data import TriangleMesh
+
+
+def _barycentric_grid(k: int) -> np.ndarray:
+    """Centroids of the k^2 equal-area sub-triangles of a triangle: (k^2, 3) weights."""
+    pts = []
+    for i in range(k):
+        for j in range(k - i):
+            pts.append(((i + 1 / 3) / k, (j + 1 / 3) / k))          # upward triangles
+            if i + j < k - 1:
+                pts.append(((i + 2 / 3) / k, (j + 2 / 3) / k))      # downward triangles
+    a = np.array(pts)
+    return np.column_stack([a, 1.0 - a.sum(axis=1)])
+
+
+def spherical_texture_average(mesh: TriangleMesh, texture: np.ndarray, samples_per_edge: int = 4,
+                              center: np.ndarray | None = None) -> np.ndarray:
+    """Area average over each face of a lat-long texture projected from ``center``.
+
+    The texture (H, W, C) is indexed in Mitsuba's envmap orientation by the
+    direction from ``center`` (default: bounding-box centre) to the surface point.
+
+    Returns
+    -------
+    (F, C) float64.
+    """
+    bary = _barycentric_grid(samples_per_edge)                     # (S, 3)
+    points = np.einsum("sk,fkd->fsd", bary, mesh.corners)            # (F, S, 3)
+    if center is None:
+        center = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
+    dirs = (points - center).reshape(-1, 3)
+    values = latlong.sample_bilinear(np.asarray(texture, dtype=np.float64), dirs)
+    return values.reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
+
+
+def region_labels(mesh: TriangleMesh, rules: list[tuple[np.ndarray, list[tuple[float, float]]]]) -> np.ndarray:
+    """Region of each face from direction bands; later rules override earlier ones.
+
+    Each rule is (axis (3,), ranges): a face belongs to it when the unit
+    direction from the bounding-box centre to its centroid, dotted with the
+    axis, lies in one of the [lo, hi] ranges. An empty range list matches all
+    faces (the base region).
+
+    Returns
+    -------
+    (F,) int64 index of the rule that won (0 when none matched).
+    """
+    center = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
+    d = mesh.centroids - center
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    labels = np.zeros(mesh.num_faces, dtype=np.int64)
+    for index, (axis, ranges) in enumerate(rules):
+        axis = np.asarray(axis, dtype=np.float64)
+        t = d @ (axis / np.linalg.norm(axis))
+        inside = np.ones(mesh.num_faces, bool) if not ranges else np.zeros(mesh.num_faces, bool)
+        for lo, hi in ranges:
+            inside |= (t >= lo) & (t <= hi)
+        labels[inside] = index
+    return labels
