@@ -30,7 +30,7 @@ PLUGIN_NAME = "pseudolight_phong"
 
 def _make_class(mi, dr):
     def as_texture(props, name, default):
-        if props.has_property(name):
+        if name in props:
             value = props[name]
             if isinstance(value, mi.Texture):
                 return value

@@ -1,0 +1,47 @@
+import numpy as np
+import pytest
+
+from estimator import camera
+
+
+def test_conversions_round_trip():
+    c2w = camera.look_at([1.0, 2.0, 3.0], [0.0, 0.2, 0.0])
+    np.testing.assert_allclose(camera.mitsuba_to_gl(camera.gl_to_mitsuba(c2w)), c2w, atol=1e-12)
+    np.testing.assert_allclose(camera.opencv_to_gl(camera.gl_to_opencv(c2w)), c2w, atol=1e-12)
+    # OpenGL looks down -Z; OpenCV down +Z; Mitsuba down +Z with +X left.
+    forward = np.array([0.0, 0.2, 0.0]) - [1.0, 2.0, 3.0]
+    forward /= np.linalg.norm(forward)
+    np.testing.assert_allclose(-c2w[:3, 2], forward, atol=1e-12)
+    np.testing.assert_allclose(camera.gl_to_opencv(c2w)[:3, 2], forward, atol=1e-12)
+    np.testing.assert_allclose(camera.gl_to_mitsuba(c2w)[:3, 2], forward, atol=1e-12)
+    np.testing.assert_allclose(camera.gl_to_mitsuba(c2w)[:3, 0], -c2w[:3, 0], atol=1e-12)
+
+
+def test_look_at_keeps_world_up_and_handles_poles():
+    c2w = camera.look_at([0, 0, 5], [0, 0, 0])
+    np.testing.assert_allclose(c2w[:3, 1], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(c2w[:3, 0], [1, 0, 0], atol=1e-12)
+    top = camera.look_at([0, 5, 0], [0, 0, 0])
+    assert np.all(np.isfinite(top)) and abs(np.linalg.det(top[:3, :3]) - 1) < 1e-12
+
+
+def test_pixel_rays_and_projection_are_inverse():
+    cam = camera.Camera(camera.look_at([0.5, 1.0, 4.0], [0, 0, 0]), 70.0, 75.0, 30.5, 22.0, 64, 48)
+    o, d = cam.pixel_rays()
+    pts = o + 3.0 * d
+    xy, depth = cam.project(pts)
+    cols, rows = np.meshgrid(np.arange(64) + 0.5, np.arange(48) + 0.5)
+    np.testing.assert_allclose(xy, np.stack([cols.ravel(), rows.ravel()], 1), atol=1e-9)
+    assert np.all(depth > 0)
+    # a point up and to the right of the optical axis lands top-right of the principal point
+    xy, _ = cam.project(cam.center + (-cam.c2w[:3, 2] + 0.1 * cam.c2w[:3, 0] + 0.1 * cam.c2w[:3, 1])[None])
+    assert xy[0, 0] > cam.cx and xy[0, 1] < cam.cy
+
+
+def test_bad_cameras_are_refused():
+    with pytest.raises(ValueError, match="4x4"):
+        camera.Camera(np.eye(3), 1, 1, 0, 0, 4, 4)
+    with pytest.raises(ValueError, match="focal"):
+        camera.Camera(np.eye(4), -1, 1, 0, 0, 4, 4)
+    with pytest.raises(ValueError, match="fov"):
+        camera.Camera.from_fov(np.eye(4), 190, 4, 4)

@@ -1,0 +1,71 @@
+"""Rendering: analytic pixel values and the camera convention against Mitsuba."""
+import numpy as np
+import pytest
+
+from estimator.camera import Camera, look_at
+from estimator.data import TriangleMesh
+from harness.geometry import icosphere
+from harness.illumination import Illumination
+from harness.render import build_scene, render_views
+
+
+def _quad(z=0.0, size=1.0):
+    v = np.array([[-size, -size, z], [size, -size, z], [size, size, z], [-size, size, z]], float)
+    return TriangleMesh(v, np.array([[0, 1, 2], [0, 2, 3]]))
+
+
+def test_rendered_pixel_matches_the_forward_model():
+    mesh = _quad(size=3.0)
+    td, ts, n = np.array([0.3, 0.5, 0.7]), np.array([0.4, 0.2, 0.1]), 10.0
+    to_light = np.array([0.3, 0.2, 0.9])
+    to_light /= np.linalg.norm(to_light)
+    e = np.array([2.0, 1.5, 1.0])
+    light = Illumination("directional", to_light=to_light[None], irradiance=e[None])
+    cam = Camera.from_fov(look_at([-0.8, 0.3, 3.0], [0, 0, 0]), 30.0, 33, 33)
+    scene = build_scene(mesh, np.tile(td, (2, 1)), np.tile(ts, (2, 1)), n, light, cam, spp=16)
+    image = render_views(scene, [cam], spp=16)[0]
+    # analytic value at the centre pixel (16, 16): its ray hits z = 0 at p
+    o, d = cam.pixel_rays()
+    k = 16 * 33 + 16
+    p = o[k] + d[k] * (-o[k, 2] / d[k, 2])
+    v = cam.center - p
+    v /= np.linalg.norm(v)
+    normal = np.array([0.0, 0.0, 1.0])
+    r = 2 * (v @ normal) * normal - v
+    expected = e * (td / np.pi * (to_light @ normal) + ts * (n + 1) / (2 * np.pi) * max(r @ to_light, 0) ** n)
+    np.testing.assert_allclose(image[16, 16, :3], expected, rtol=5e-3)
+    assert image[16, 16, 3] == pytest.approx(1.0)
+
+
+def test_shadowed_point_is_black_with_the_deterministic_integrator():
+    # a small quad hovering above the big one shadows it exactly below (light from +Z)
+    big, small = _quad(0.0, 2.0), _quad(0.5, 0.4)
+    mesh = TriangleMesh(np.vstack([big.vertices, small.vertices]), np.vstack([big.faces, small.faces + 4]))
+    light = Illumination("directional", to_light=np.array([[0.0, 0.0, 1.0]]), irradiance=np.ones((1, 3)))
+    cam = Camera.from_fov(look_at([0.0, -4.0, 1.5], [0, 0, 0]), 50.0, 41, 41)
+    scene = build_scene(mesh, np.full((4, 3), 0.5), np.zeros((4, 3)), 10.0, light, cam, spp=1)
+    image = render_views(scene, [cam], spp=1)[0]
+    xy, _ = cam.project(np.array([[0.0, 0.2, 0.0], [1.5, 1.5, 0.0]]))
+    shadowed = image[int(xy[0, 1]), int(xy[0, 0]), :3]
+    lit = image[int(xy[1, 1]), int(xy[1, 0]), :3]
+    assert np.all(shadowed < 1e-6)
+    np.testing.assert_allclose(lit, 0.5 / np.pi, rtol=1e-4)
+
+
+@pytest.mark.parametrize("cx,cy", [(32.0, 24.0), (27.5, 20.0)])
+def test_projected_point_lands_where_mitsuba_renders_it(cx, cy):
+    # a small sphere off the optical axis; its coverage centroid must be its projection
+    ball = icosphere(3, 0.05)
+    center = np.array([0.35, 0.25, -0.1])
+    mesh = TriangleMesh(ball.vertices + center, ball.faces)
+    c2w = look_at([0.4, 0.5, 2.5], [0, 0, 0])
+    f = 0.5 * 64 / np.tan(np.radians(20.0))
+    cam = Camera(c2w, f, f, cx, cy, 64, 48)
+    light = Illumination("directional", to_light=np.array([[0.0, 0.0, 1.0]]), irradiance=np.ones((1, 3)))
+    scene = build_scene(mesh, np.full((mesh.num_faces, 3), 0.5), np.zeros((mesh.num_faces, 3)), 10.0,
+                        light, cam, spp=64)
+    alpha = render_views(scene, [cam], spp=64)[0][..., 3]
+    rows, cols = np.mgrid[0:48, 0:64] + 0.5
+    centroid = np.array([(alpha * cols).sum(), (alpha * rows).sum()]) / alpha.sum()
+    xy, _ = cam.project(center[None])
+    np.testing.assert_allclose(centroid, xy[0], atol=0.15)

@@ -1,0 +1,70 @@
+import os
+
+import pytest
+
+from harness.scene_spec import SpecError, load_spec, parse_spec, resolve_scene, shipped_scenes
+
+
+def test_shipped_scenes_load_with_every_profile():
+    scenes = shipped_scenes()
+    assert {"earth-specular", "sparse-colored", "probe-envmap"} <= set(scenes)
+    for path in scenes.values():
+        spec = load_spec(path)
+        for profile in spec.profiles:
+            load_spec(path, profile=profile)
+
+
+def _base(tmp_path):
+    return {"name": "t", "illumination": {"type": "directional", "lights": [{"to_light": [0, 1, 0]}]}}
+
+
+@pytest.mark.parametrize("patch,message", [
+    ({"cameras": {"widht": 64}}, "cameras.widht"),
+    ({"colour": 1}, "spec.colour"),
+    ({"cameras": {"width": 0}}, "cameras.width"),
+    ({"cameras": {"fov": 200.0}}, "cameras.fov"),
+    ({"render": {"spp": 0}}, "render.spp"),
+    ({"material": {"exponent": -2.0}}, "material.exponent"),
+    ({"material": {"specular": {"texture": "nope.png"}}}, "material.specular.texture"),
+    ({"material": {"diffuse": {"value": [1, 2]}}}, "material.diffuse.value"),
+    ({"illumination": {"type": "envmap", "file": "missing.hdr"}}, "illumination.file"),
+    ({"illumination": {"type": "laser"}}, "illumination.type"),
+    ({"illumination": {"type": "directional", "lights": [{"position": [0, 1, 0]}]}}, "illumination.lights[0]"),
+    ({"geometry": {"type": "mesh"}}, "geometry.file"),
+    ({"render": {"integrator": "direct"}, "illumination": {"type": "envmap", "file": "a.hdr"}}, "illumination.file"),
+])
+def test_bad_specs_name_the_key(tmp_path, patch, message):
+    raw = _base(tmp_path)
+    for key, value in patch.items():
+        if isinstance(value, dict) and isinstance(raw.get(key), dict):
+            raw[key] = {**raw[key], **value} if key != "illumination" else value
+        else:
+            raw[key] = value
+    with pytest.raises(SpecError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        parse_spec(raw, str(tmp_path))
+
+
+def test_direct_integrator_refused_for_envmap(tmp_path):
+    (tmp_path / "a.hdr").write_bytes(b"")
+    raw = {"name": "t", "illumination": {"type": "envmap", "file": "a.hdr"}, "render": {"integrator": "direct"}}
+    with pytest.raises(SpecError, match="render.integrator"):
+        parse_spec(raw, str(tmp_path))
+
+
+def test_missing_and_broken_files(tmp_path):
+    with pytest.raises(SpecError, match="not found"):
+        load_spec(tmp_path / "none.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = \n")
+    with pytest.raises(SpecError, match="not valid TOML"):
+        load_spec(bad)
+    with pytest.raises(SpecError, match="shipped"):
+        resolve_scene("no-such-scene")
+    with pytest.raises(SpecError, match="profile"):
+        load_spec(resolve_scene("earth-specular"), profile="huge")
+
+
+def test_relative_assets_resolve_against_the_spec_folder():
+    spec = load_spec(resolve_scene("earth-specular"))
+    assert os.path.isfile(spec.material.specular.texture)
+    assert spec.illumination.file.endswith(os.path.join("scenes", "assets", "grace.hdr"))
