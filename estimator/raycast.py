@@ -79,6 +79,18 @@ class RayCaster:
         o, d = camera.pixel_rays()
         return self.first_hit_faces(o, d).reshape(camera.height, camera.width)
 
+    def pure_face_buffer(self, camera: Camera) -> np.ndarray:
+        """(H, W) face seen through each pixel centre, -1 where the pixel is background
+        *or* not covered by that face alone (a pixel corner ray hits another face or
+        nothing). Pure pixels carry one face's colour even with antialiased images."""
+        centre = self.face_id_buffer(camera)
+        corner_cam = Camera(camera.c2w, camera.fx, camera.fy, camera.cx + 0.5, camera.cy + 0.5,
+                            camera.width + 1, camera.height + 1)
+        corners = self.face_id_buffer(corner_cam)      # (H+1, W+1): ray through each pixel corner
+        pure = ((corners[:-1, :-1] == centre) & (corners[1:, :-1] == centre)
+                & (corners[:-1, 1:] == centre) & (corners[1:, 1:] == centre))
+        return np.where(pure, centre, -1)
+
     def occluded(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(N,) bool: True when the ray (N, 3) x (N, 3) hits any geometry."""
         if len(origins) == 0:

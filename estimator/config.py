@@ -1,0 +1,86 @@
+"""Parameters of the estimator, validated in one place."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from .solver import COMPONENTS
+
+DIFFUSE_LIGHTS = ("pseudo", "defiltered")
+MIRROR_SHADOWS = ("nearest", "lobe")
+
+
+@dataclass
+class EstimatorConfig:
+    """Every parameter of the pipeline (defaults follow the paper where it gives one).
+
+    Attributes
+    ----------
+    sh_order : SH order N_L of the pseudo illumination ((N_L + 1)^2 coefficients).
+    directions : number of sample directions of the shadow function (paper: 1164).
+    iterations, tol : ALS iteration cap and relative residual-change stop.
+    components : 'both', 'specular' (t_d = 0, the earth experiment) or 'diffuse'.
+    min_cos_view : keep an observation only when r . n = v . n exceeds this
+        (0.5 = within 60 degrees of the normal). Far from the normal the Phong
+        lobe around r is cut by the horizon, which the mirror term ignores.
+    min_pixels : pixels a face must cover in a view to give an observation.
+    pure_pixels : use only pixels covered by one face alone (corner rays agree).
+    min_brightness : bilinear-clustered leaves unestimated (label -1) the faces whose
+        median colour is below this fraction of the 95th percentile: unlit in every
+        view, they carry no colour information.
+    bandwidth : angular mean-shift sigma on unit colours (radians).
+    split_bandwidth : Euclidean split sigma, relative to a cluster's median albedo.
+    min_cluster_fraction : a split-off cluster needs at least this share of the
+        estimated faces (else its faces join the nearest kept sub-cluster).
+    recluster_rounds : cap on solve + re-cluster rounds.
+    diffuse_light : 'pseudo' (the paper: diffuse term from the pseudo
+        illumination) or 'defiltered' (divided by the Phong filter up to
+        ``defilter_order``, for exponent ``phong_exponent``).
+    mirror_shadow : 'nearest' (the paper: shadow of the mirror term at the
+        sample direction nearest r) or 'lobe' (unoccluded fraction of the
+        Phong lobe of ``phong_exponent`` around r, horizon included).
+    variant : Mitsuba variant for the ray queries (None: auto).
+    """
+
+    sh_order: int = 10
+    directions: int = 1164
+    iterations: int = 20
+    tol: float = 1e-6
+    components: str = "both"
+    min_cos_view: float = 0.5
+    min_pixels: int = 1
+    pure_pixels: bool = True
+    min_brightness: float = 0.03
+    bandwidth: float = 0.08
+    split_bandwidth: float = 0.2
+    min_cluster_fraction: float = 0.01
+    recluster_rounds: int = 5
+    diffuse_light: str = "pseudo"
+    defilter_order: int = 2
+    phong_exponent: float = 10.0
+    mirror_shadow: str = "nearest"
+    variant: str | None = None
+
+    def __post_init__(self):
+        checks = [
+            (0 <= self.sh_order <= 30, "sh_order must lie in [0, 30]"),
+            (self.directions >= 12, "directions must be >= 12"),
+            (self.iterations >= 1, "iterations must be >= 1"),
+            (self.tol >= 0, "tol must be >= 0"),
+            (self.components in COMPONENTS, f"components must be one of {COMPONENTS}"),
+            (-1.0 <= self.min_cos_view < 1.0, "min_cos_view must lie in [-1, 1)"),
+            (self.min_pixels >= 1, "min_pixels must be >= 1"),
+            (self.bandwidth > 0 and self.split_bandwidth > 0, "bandwidths must be > 0"),
+            (0 <= self.min_brightness < 1, "min_brightness must lie in [0, 1)"),
+            (0 <= self.min_cluster_fraction < 0.5, "min_cluster_fraction must lie in [0, 0.5)"),
+            (self.recluster_rounds >= 1, "recluster_rounds must be >= 1"),
+            (self.diffuse_light in DIFFUSE_LIGHTS, f"diffuse_light must be one of {DIFFUSE_LIGHTS}"),
+            (0 <= self.defilter_order <= self.sh_order, "defilter_order must lie in [0, sh_order]"),
+            (self.phong_exponent > 0, "phong_exponent must be > 0"),
+            (self.mirror_shadow in MIRROR_SHADOWS, f"mirror_shadow must be one of {MIRROR_SHADOWS}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"estimator config: {message}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)

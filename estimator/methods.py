@@ -1,0 +1,232 @@
+"""Estimation methods, registered by name. A new method is one class here (or anywhere)
+decorated with :func:`register_method`; nothing else changes."""
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from . import sh
+from .clustering import mean_shift, split_clusters
+from .config import EstimatorConfig
+from .data import MultiViewData
+from .pipeline import Prepared, prepare
+from .solver import BilinearResult, solve_bilinear
+
+
+@dataclass
+class Estimate:
+    """The result of a method, per face in ``mesh.ply`` order.
+
+    Attributes
+    ----------
+    diffuse, specular : (F, 3) linear albedo (0 where not observed).
+    sh : (M, 3) pseudo illumination, unit DC per channel.
+    labels : (F,) int64 cluster of each face, -1 where not observed.
+    observed : (F,) bool faces with an estimate.
+    method : registry name; config : the EstimatorConfig used.
+    info : timings (s) per stage, solver residuals, counts.
+    """
+
+    diffuse: np.ndarray
+    specular: np.ndarray
+    sh: np.ndarray
+    labels: np.ndarray
+    observed: np.ndarray
+    method: str
+    config: EstimatorConfig
+    info: dict = field(default_factory=dict)
+
+    @property
+    def sh_order(self) -> int:
+        return int(round(np.sqrt(self.sh.shape[0]))) - 1
+
+
+REGISTRY: dict[str, type["Method"]] = {}
+
+
+def register_method(cls: type["Method"]) -> type["Method"]:
+    """Class decorator: make a method available under ``cls.name``."""
+    if not getattr(cls, "name", None):
+        raise ValueError(f"{cls.__name__} needs a 'name'")
+    REGISTRY[cls.name] = cls
+    return cls
+
+
+def get_method(name: str) -> type["Method"]:
+    if name not in REGISTRY:
+        raise ValueError(f"unknown method {name!r}; registered: {', '.join(sorted(REGISTRY))}")
+    return REGISTRY[name]
+
+
+class Method(ABC):
+    """A way to turn prepared observations into an Estimate."""
+
+    name: ClassVar[str] = ""
+    needs_illumination: ClassVar[bool] = False
+
+    def __init__(self, config: EstimatorConfig):
+        self.config = config
+
+    @abstractmethod
+    def solve(self, prep: Prepared, known_sh: np.ndarray | None) -> Estimate: ...
+
+    def _from_groups(self, prep: Prepared, face_group: np.ndarray, result: BilinearResult,
+                     observed: np.ndarray, info: dict) -> Estimate:
+        f = prep.data.mesh.num_faces
+        diffuse, specular = np.zeros((f, 3)), np.zeros((f, 3))
+        diffuse[observed] = result.diffuse[face_group[observed]]
+        specular[observed] = result.specular[face_group[observed]]
+        labels = np.where(observed, face_group, -1).astype(np.int64)
+        info = {**info, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
+                "lm_steps": [len(r) for r in result.lm_residuals]}
+        return Estimate(diffuse, specular, result.sh, labels, observed, self.name, self.config, info)
+
+    def _solve_groups(self, prep: Prepared, face_group: np.ndarray, num_groups: int,
+                      fixed_sh: np.ndarray | None = None) -> BilinearResult:
+        c = self.config
+        return solve_bilinear(prep.obs.rgb, face_group[prep.obs.face], prep.c_rows, prep.d_rows, num_groups,
+                              c.components, c.iterations, c.tol, fixed_sh)
+
+
+def _per_face_groups(prep: Prepared) -> tuple[np.ndarray, np.ndarray, int]:
+    observed = prep.obs.observed_faces()
+    group = np.cumsum(observed) - 1
+    return np.where(observed, group, 0), observed, int(observed.sum())
+
+
+@register_method
+class BilinearPerFace(Method):
+    """Every face its own cluster (the paper's Fig. 7 d, e): exact for specular-only
+    data, ambiguous between diffuse and the constant part of specular otherwise."""
+
+    name = "bilinear-per-face"
+
+    def solve(self, prep, known_sh=None):
+        group, observed, g = _per_face_groups(prep)
+        return self._from_groups(prep, group, self._solve_groups(prep, group, g), observed, {"clusters": g})
+
+
+@register_method
+class KnownIllumination(Method):
+    """The oracle: h fixed to a given pseudo illumination, per-face albedos by linear least squares."""
+
+    name = "known-illumination"
+    needs_illumination = True
+
+    def solve(self, prep, known_sh=None):
+        if known_sh is None:
+            raise ValueError("known-illumination needs the pseudo illumination SH (known_sh)")
+        m = sh.num_coeffs(self.config.sh_order)
+        fixed = np.zeros((m, 3))
+        k = min(m, known_sh.shape[0])
+        fixed[:k] = known_sh[:k]
+        fixed /= np.where(np.abs(fixed[0]) > 0, fixed[0], 1.0)
+        group, observed, g = _per_face_groups(prep)
+        return self._from_groups(prep, group, self._solve_groups(prep, group, g, fixed), observed, {"clusters": g})
+
+
+@register_method
+class MedianColor(Method):
+    """The naive baseline: albedo = median observed colour, no illumination model."""
+
+    name = "median-color"
+
+    def solve(self, prep, known_sh=None):
+        med = prep.all_obs.median_color()
+        observed = ~np.isnan(med[:, 0])
+        med = np.nan_to_num(med)
+        f = len(med)
+        zero = np.zeros_like(med)
+        diffuse, specular = (zero, med) if self.config.components == "specular" else (med, zero)
+        h = np.zeros((sh.num_coeffs(self.config.sh_order), 3))
+        h[0] = 1.0
+        labels = np.where(observed, np.arange(f), -1)
+        return Estimate(diffuse, specular, h, labels, observed, self.name, self.config, {"clusters": int(observed.sum())})
+
+
+@register_method
+class BilinearClustered(Method):
+    """The full method: angular mean-shift clusters of median colours, ALS solve,
+    Euclidean re-clustering of shading-corrected colours, repeated until stable."""
+
+    name = "bilinear-clustered"
+
+    def solve(self, prep, known_sh=None):
+        c = self.config
+        med = prep.all_obs.median_color()
+        brightness = np.nan_to_num(med).mean(axis=1)
+        # faces that stay dark in every view carry no colour: they are not estimated
+        observed = ~np.isnan(med[:, 0]) & (brightness > c.min_brightness * np.percentile(brightness, 95))
+        seen = np.nonzero(observed)[0]
+        face_group = np.zeros(len(med), dtype=np.int64)
+        t = time.perf_counter()
+        angular, _ = mean_shift(med[seen], c.bandwidth, metric="angular")
+        face_group[seen] = angular
+        history = [int(angular.max()) + 1]
+        visited = [angular]
+        result = None
+        for _ in range(c.recluster_rounds):
+            result = self._solve_groups(prep, face_group, int(face_group.max()) + 1)
+            albedo, valid = self._shading_corrected(prep, face_group, result, med)
+            min_size = max(3, int(c.min_cluster_fraction * len(seen)))
+            split = split_clusters(albedo[seen], angular, c.split_bandwidth, valid[seen], min_size)
+            history.append(int(split.max()) + 1)
+            if any(_same_partition(split, old) for old in visited):
+                break  # stable (or cycling back to a partition already solved)
+            visited.append(split)
+            face_group[seen] = split
+        else:
+            result = self._solve_groups(prep, face_group, int(face_group.max()) + 1)
+        info = {"clusters": int(face_group[seen].max()) + 1, "angular_clusters": history[0],
+                "clusters_per_round": history, "clustering_s": time.perf_counter() - t}
+        return self._from_groups(prep, face_group, result, observed, info)
+
+    @staticmethod
+    def _shading_corrected(prep, face_group, result, med):
+        """Per-face diffuse albedo with the light and the cluster's specular albedo fixed
+        (the paper divides colours by the diffuse shading sum h C)."""
+        obs = prep.obs
+        f = len(med)
+        shade_face = prep.c_matrix @ result.sh                                  # (F, 3)
+        spec = result.specular[face_group[obs.face]] * (prep.d_rows @ result.sh)
+        num = np.stack([np.bincount(obs.face, (obs.rgb[:, k] - spec[:, k]), minlength=f) for k in range(3)], 1)
+        cnt = np.bincount(obs.face, minlength=f)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            diffuse_colour = np.where(cnt > 0, num / np.maximum(cnt, 1), med)
+            albedo = diffuse_colour / shade_face
+        lum = shade_face.mean(axis=1)
+        valid = (lum > 0.25 * np.percentile(lum, 90)) & np.all(np.isfinite(albedo), axis=1)
+        return np.where(np.isfinite(albedo), albedo, 0.0), valid
+
+
+def _same_partition(a: np.ndarray, b: np.ndarray) -> bool:
+    """True when two labelings group the items identically (labels may be renamed)."""
+    pairs = np.unique(np.stack([a, b], 1), axis=0)
+    return len(pairs) == len(np.unique(a)) == len(np.unique(b))
+
+
+def estimate(data: MultiViewData, method: str = "bilinear-clustered", config: EstimatorConfig | None = None,
+             known_sh: np.ndarray | None = None, log=None) -> Estimate:
+    """Run a registered method on in-memory data (the estimator's one entry point).
+
+    Parameters
+    ----------
+    known_sh : (M', 3) pseudo illumination for 'known-illumination' (truncated/padded to the order).
+    log : optional callable receiving progress lines.
+    """
+    config = config or EstimatorConfig()
+    cls = get_method(method)
+    t0 = time.perf_counter()
+    prep = prepare(data, config, log)
+    t = time.perf_counter()
+    est = cls(config).solve(prep, known_sh)
+    est.info["timings"] = {**prep.timings, "solve": time.perf_counter() - t, "total": time.perf_counter() - t0}
+    est.info["observations"] = int(len(prep.obs.face))
+    est.info["observations_all"] = int(len(prep.all_obs.face))
+    est.info["unobserved_share"] = float(1.0 - est.observed.mean())
+    est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
+    return est

@@ -1,0 +1,1 @@
+"""pseudolight reports: metrics, ground-truth filtering, figures, HTML, regression, comparisons."""
