@@ -6,7 +6,7 @@ from dataclasses import asdict, dataclass
 from .solver import COMPONENTS
 
 DIFFUSE_LIGHTS = ("pseudo", "defiltered")
-MIRROR_SHADOWS = ("nearest", "lobe")
+SPECULAR_MODELS = ("mirror", "lobe")
 
 
 @dataclass
@@ -35,9 +35,10 @@ class EstimatorConfig:
     diffuse_light : 'pseudo' (the paper: diffuse term from the pseudo
         illumination) or 'defiltered' (divided by the Phong filter up to
         ``defilter_order``, for exponent ``phong_exponent``).
-    mirror_shadow : 'nearest' (the paper: shadow of the mirror term at the
-        sample direction nearest r) or 'lobe' (unoccluded fraction of the
-        Phong lobe of ``phong_exponent`` around r, horizon included).
+    specular_model : 'mirror' (the paper's Eq. 10: D = Y(r) s(r) times the
+        pseudo illumination) or 'lobe' (the Phong lobe of ``phong_exponent``
+        integrated over the sphere with the face's horizon and shadows, times
+        the radiance; exact for the Phong BRDF, needs the exponent).
     variant : Mitsuba variant for the ray queries (None: auto).
     """
 
@@ -57,7 +58,7 @@ class EstimatorConfig:
     diffuse_light: str = "pseudo"
     defilter_order: int = 2
     phong_exponent: float = 10.0
-    mirror_shadow: str = "nearest"
+    specular_model: str = "mirror"
     variant: str | None = None
 
     def __post_init__(self):
@@ -76,7 +77,7 @@ class EstimatorConfig:
             (self.diffuse_light in DIFFUSE_LIGHTS, f"diffuse_light must be one of {DIFFUSE_LIGHTS}"),
             (0 <= self.defilter_order <= self.sh_order, "defilter_order must lie in [0, sh_order]"),
             (self.phong_exponent > 0, "phong_exponent must be > 0"),
-            (self.mirror_shadow in MIRROR_SHADOWS, f"mirror_shadow must be one of {MIRROR_SHADOWS}"),
+            (self.specular_model in SPECULAR_MODELS, f"specular_model must be one of {SPECULAR_MODELS}"),
         ]
         for ok, message in checks:
             if not ok:

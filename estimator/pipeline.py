@@ -11,7 +11,7 @@ from .config import EstimatorConfig
 from .data import MultiViewData
 from .observations import Observations, gather_observations
 from .raycast import RayCaster
-from .reflection import diffuse_matrix, mirror_directions, mirror_matrix
+from .reflection import diffuse_matrix, lobe_matrix, mirror_directions, mirror_matrix
 from .visibility import SphereSampling, Visibility, compute_visibility, sphere_sampling
 
 
@@ -23,9 +23,8 @@ class Prepared:
     ----------
     all_obs : every observation (for median colours).
     obs : observations kept for the solve (``min_cos_view`` cut).
-    c_matrix : (F, M) diffuse matrix C, columns scaled by the defilter gains
-        when ``diffuse_light='defiltered'``.
-    d_rows : (N, M) mirror matrix rows of ``obs``.
+    c_matrix : (F, M) diffuse matrix C, columns scaled by :func:`diffuse_gains`.
+    d_rows : (N, M) specular rows of ``obs`` (:func:`specular_rows`).
     timings : seconds per stage.
     """
 
@@ -46,14 +45,28 @@ class Prepared:
         return self.c_matrix[self.obs.face]
 
 
-def defilter_gains(config: EstimatorConfig) -> np.ndarray:
-    """Per-coefficient gains applied to C: 1 / (Phong filter) up to ``defilter_order``
-    when ``diffuse_light='defiltered'``, else ones. Shape ((L + 1)^2,)."""
+def diffuse_gains(config: EstimatorConfig) -> np.ndarray:
+    """Per-coefficient gains that turn the pseudo illumination h into the light of the
+    diffuse term: ones (the paper), 1 / (Phong filter) up to ``defilter_order``
+    (``diffuse_light='defiltered'``), or at every order (``specular_model='lobe'``,
+    where the radiance L = h / filter is modelled exactly). Shape ((L + 1)^2,)."""
     gains = np.ones(config.sh_order + 1)
-    if config.diffuse_light == "defiltered":
-        f = sh.phong_filter(config.sh_order, config.phong_exponent)
+    f = sh.phong_filter(config.sh_order, config.phong_exponent)
+    if config.specular_model == "lobe":
+        gains = 1.0 / f
+    elif config.diffuse_light == "defiltered":
         gains[: config.defilter_order + 1] = 1.0 / f[: config.defilter_order + 1]
     return sh.expand_per_degree(gains)
+
+
+def specular_rows(config: EstimatorConfig, faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
+                  visibility: Visibility) -> np.ndarray:
+    """(N, M) rows multiplying h in the specular term, for the configured model."""
+    if config.specular_model == "lobe":
+        radiance_rows = lobe_matrix(faces, mirror, sampling, visibility, config.sh_order, config.phong_exponent)
+        inverse_filter = 1.0 / sh.expand_per_degree(sh.phong_filter(config.sh_order, config.phong_exponent))
+        return radiance_rows * inverse_filter[None]
+    return mirror_matrix(faces, mirror, sampling, visibility, config.sh_order)
 
 
 def prepare(data: MultiViewData, config: EstimatorConfig, log=None) -> Prepared:
@@ -79,9 +92,8 @@ def prepare(data: MultiViewData, config: EstimatorConfig, log=None) -> Prepared:
     say(f"visibility: {data.mesh.num_faces} faces x {config.directions} directions")
 
     t = time.perf_counter()
-    c_matrix = diffuse_matrix(data.mesh, sampling, visibility, config.sh_order) * defilter_gains(config)[None]
+    c_matrix = diffuse_matrix(data.mesh, sampling, visibility, config.sh_order) * diffuse_gains(config)[None]
     mirror = mirror_directions(normals[obs.face], obs.view_dir)
-    d_rows = mirror_matrix(obs.face, mirror, sampling, visibility, config.sh_order,
-                           config.mirror_shadow, config.phong_exponent)
+    d_rows = specular_rows(config, obs.face, mirror, sampling, visibility)
     timings["reflection"] = time.perf_counter() - t
     return Prepared(data, config, caster, sampling, visibility, all_obs, obs, c_matrix, d_rows, timings)

@@ -74,6 +74,15 @@ class RayCaster:
         prim = np.asarray(pi.prim_index, dtype=np.int64)
         return np.where(hit, prim, -1)
 
+    def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(face (N,) int64 with -1 on a miss, distance t (N,) float64, inf on a miss)."""
+        if len(origins) == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        pi = self.scene.ray_intersect_preliminary(self._rays(origins, directions))
+        hit = np.asarray(pi.is_valid(), dtype=bool)
+        return (np.where(hit, np.asarray(pi.prim_index, dtype=np.int64), -1),
+                np.where(hit, np.asarray(pi.t, dtype=np.float64), np.inf))
+
     def face_id_buffer(self, camera: Camera) -> np.ndarray:
         """(H, W) int64 face seen through each pixel centre, -1 for background."""
         o, d = camera.pixel_rays()

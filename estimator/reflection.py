@@ -31,38 +31,10 @@ def mirror_directions(normals: np.ndarray, view_dir: np.ndarray) -> np.ndarray:
     return 2.0 * np.sum(normals * view_dir, axis=1, keepdims=True) * normals - view_dir
 
 
-def lobe_visibility(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
-                    visibility: Visibility, exponent: float, chunk: int = 8192) -> np.ndarray:
-    """Unoccluded fraction of the Phong lobe around r, per row.
-
-    s_lobe = sum_k w_k s_i(d_k) max(0, r . d_k)^n / sum_k w_k max(0, r . d_k)^n.
-    Directions below the face's plane count as occluded, so a lobe cut by the
-    horizon (r far from the normal) or by a shadow boundary is weighted by
-    the part that reaches the light.
-
-    Returns
-    -------
-    (N,) float64 in [0, 1].
-    """
-    out = np.empty(len(faces))
-    dirs = sampling.directions.astype(np.float32)
-    w = sampling.weights.astype(np.float32)
-    for start in range(0, len(faces), chunk):
-        stop = min(start + chunk, len(faces))
-        lobe = np.maximum(mirror[start:stop].astype(np.float32) @ dirs.T, 0.0) ** np.float32(exponent) * w
-        vis = np.unpackbits(visibility.bits[faces[start:stop]], axis=1, count=visibility.num_directions)
-        out[start:stop] = np.sum(lobe * vis, axis=1) / np.maximum(lobe.sum(axis=1), 1e-30)
-    return out
-
-
 def mirror_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
-                  visibility: Visibility, order: int, shadow: str = "nearest",
-                  exponent: float = 10.0) -> np.ndarray:
-    """D_lm^(i)(r) = Y_lm(r) s_i(r): the mirror term.
-
-    ``shadow='nearest'`` (the paper, Eq. 10) takes s_i at the sample direction
-    nearest to r; ``shadow='lobe'`` takes the unoccluded fraction of the Phong
-    lobe of ``exponent`` around r (:func:`lobe_visibility`).
+                  visibility: Visibility, order: int) -> np.ndarray:
+    """D_lm^(i)(r) = Y_lm(r) s_i(r), the paper's mirror term (Eq. 10): the shadow
+    is taken at the sample direction nearest to r.
 
     Parameters
     ----------
@@ -71,12 +43,31 @@ def mirror_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSamplin
 
     Returns
     -------
+    (N, (L + 1)^2) float64, multiplying the pseudo illumination h.
+    """
+    shadow = visibility.lookup(faces, sampling.nearest(mirror))
+    return sh.basis(order, mirror) * shadow[:, None]
+
+
+def lobe_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling, visibility: Visibility,
+                order: int, exponent: float, chunk: int = 4096) -> np.ndarray:
+    """The specular term with the Phong lobe integrated exactly, cut by the horizon and shadows.
+
+    E_lm^(i)(r) = int Y_lm(w) (n + 1)/(2 pi) max(0, r . w)^n s_i(w) dw, by the sphere
+    quadrature (s_i = 0 below the face's plane). It multiplies the *radiance* SH
+    L = h / Lambda rho, so the specular term needs no pseudo-illumination
+    approximation: E . L = D . h wherever the lobe is whole and unshadowed.
+
+    Returns
+    -------
     (N, (L + 1)^2) float64.
     """
-    if shadow == "nearest":
-        factor = visibility.lookup(faces, sampling.nearest(mirror)).astype(np.float64)
-    elif shadow == "lobe":
-        factor = lobe_visibility(faces, mirror, sampling, visibility, exponent)
-    else:
-        raise ValueError(f"shadow must be 'nearest' or 'lobe', got {shadow!r}")
-    return sh.basis(order, mirror) * factor[:, None]
+    y = sh.basis(order, sampling.directions)                                     # (K, M)
+    norm = (exponent + 1.0) / (2.0 * np.pi)
+    out = np.empty((len(faces), y.shape[1]))
+    for start in range(0, len(faces), chunk):
+        stop = min(start + chunk, len(faces))
+        lobe = np.maximum(mirror[start:stop] @ sampling.directions.T, 0.0) ** exponent
+        vis = visibility.unpack(faces[start:stop])
+        out[start:stop] = (lobe * vis * (norm * sampling.weights)) @ y
+    return out

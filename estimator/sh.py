@@ -191,3 +191,17 @@ def expand_per_degree(per_degree: np.ndarray) -> np.ndarray:
     """(L + 1,) per-degree values -> ((L + 1)^2,) per coefficient."""
     per_degree = np.asarray(per_degree)
     return per_degree[degrees(per_degree.shape[0] - 1)]
+
+
+def pseudo_illumination(radiance: np.ndarray, exponent: float, order: int | None = None) -> np.ndarray:
+    """Radiance SH (M, C) -> pseudo illumination SH, filtered by the Phong lobe of
+    ``exponent``, truncated to ``order`` and normalised to unit DC per channel
+    (the estimate's gauge)."""
+    radiance = np.asarray(radiance, dtype=np.float64)
+    have = int(round(np.sqrt(radiance.shape[0]))) - 1
+    order = have if order is None else order
+    if order > have:
+        raise ValueError(f"the radiance SH have order {have}, cannot filter to order {order}")
+    out = radiance[: num_coeffs(order)] * expand_per_degree(phong_filter(order, exponent))[:, None]
+    dc = np.where(np.abs(out[0]) > 0, out[0], 1.0)
+    return out / dc

@@ -8,14 +8,17 @@ import resource
 import sys
 import time
 
+import numpy as np
+
 from estimator.backend import VARIANTS, BackendError
 
 from .atomic import OutputExistsError
 from .dataset import DatasetError
+from .runs import RunError
 from .scene_spec import SpecError, load_spec, resolve_scene, shipped_scenes
 
 DEFAULT_SCENE = "earth-specular"
-USER_ERRORS = (SpecError, DatasetError, BackendError, OutputExistsError, FileNotFoundError, ValueError)
+USER_ERRORS = (RunError, SpecError, DatasetError, BackendError, OutputExistsError, FileNotFoundError, ValueError)
 
 
 def _peak_rss_mib() -> float:
@@ -74,6 +77,103 @@ def cmd_demo(args) -> int:
     return 0
 
 
+CONFIG_FLAGS = {  # CLI flag -> EstimatorConfig field
+    "components": "components", "sh_order": "sh_order", "directions": "directions",
+    "iterations": "iterations", "min_cos_view": "min_cos_view", "diffuse_light": "diffuse_light",
+    "defilter_order": "defilter_order", "phong_exponent": "phong_exponent",
+    "specular_model": "specular_model", "variant": "variant",
+}
+
+
+def resolve_estimator(args, meta: dict) -> tuple[str, "EstimatorConfig"]:
+    """Method and config: EstimatorConfig defaults <- the dataset's estimator_defaults <- flags."""
+    from estimator.config import EstimatorConfig
+
+    chosen = dict(meta.get("estimator_defaults") or {})
+    method = args.method or chosen.pop("method", None) or "bilinear-clustered"
+    chosen.pop("method", None)
+    for flag, key in CONFIG_FLAGS.items():
+        value = getattr(args, flag, None)
+        if value is not None:
+            chosen[key] = value
+    return method, EstimatorConfig(**chosen)
+
+
+def cmd_estimate(args) -> int:
+    from estimator import sh
+    from estimator.methods import estimate, get_method
+
+    from .dataset import read_dataset
+    from .runs import write_run
+
+    ds = read_dataset(args.dataset, load_test=False)
+    method, config = resolve_estimator(args, ds.meta)
+    known = None
+    if get_method(method).needs_illumination:
+        if ds.ground_truth is None:
+            raise ValueError(f"method {method} needs the true illumination, and {args.dataset} has no ground_truth/")
+        known = sh.pseudo_illumination(ds.ground_truth.sh, ds.ground_truth.brdf["exponent"])
+    est = estimate(ds.data, method, config, known_sh=known, log=lambda m: print(f"  {m}", file=sys.stderr))
+    est.info["peak_rss_mib"] = _peak_rss_mib()
+    write_run(args.output, est, args.dataset, overwrite=args.overwrite,
+              extra={"scene": ds.meta.get("scene")})
+    t = est.info["timings"]
+    print(f"{method} on {ds.meta.get('scene', args.dataset)}: {est.info.get('clusters', '?')} clusters, "
+          f"{100 * est.observed.mean():.1f}% faces estimated, {t['total']:.1f} s "
+          f"(observations {t['observations']:.1f}, visibility {t['visibility']:.1f}, "
+          f"reflection {t['reflection']:.1f}, solve {t['solve']:.1f}), peak {_peak_rss_mib():.0f} MiB\n"
+          f"written to {os.path.abspath(args.output)}")
+    return 0
+
+
+def cmd_render(args) -> int:
+    from estimator.forward import Predictor
+    from estimator.sh import axis_angle_matrix
+
+    from .atomic import atomic_directory
+    from .dataset import read_dataset
+    from .exr import write_exr
+    from .runs import read_run
+
+    est, run = read_run(args.run)
+    ds = read_dataset(args.dataset or run["dataset"])
+    views = {"test": ds.data.test_views, "train": ds.data.views,
+             "all": ds.data.views + ds.data.test_views}[args.frames]
+    if not views:
+        raise ValueError(f"the dataset has no {args.frames} frames")
+    rotation = None
+    if args.rotate_illumination:
+        axis, degrees = args.rotate_illumination
+        rotation = axis_angle_matrix(axis, float(degrees))
+    predictor = Predictor(ds.data.mesh, est)
+    with atomic_directory(args.output, overwrite=args.overwrite) as tmp:
+        for view in views:
+            rgb, coverage = predictor.predict(view.camera, rotation)
+            name = os.path.splitext(os.path.basename(view.name))[0] + ".exr"
+            write_exr(os.path.join(tmp, name), np.concatenate([rgb, coverage[..., None]], axis=2))
+    print(f"{len(views)} predicted images written to {os.path.abspath(args.output)}")
+    return 0
+
+
+def _add_estimator_flags(p) -> None:
+    from estimator.config import DIFFUSE_LIGHTS, SPECULAR_MODELS
+    from estimator.solver import COMPONENTS
+
+    p.add_argument("--method", help="registered method (default: the dataset's recommendation, "
+                                    "else bilinear-clustered)")
+    p.add_argument("--components", choices=COMPONENTS)
+    p.add_argument("--sh-order", type=int)
+    p.add_argument("--directions", type=int, help="sample directions of the shadow function (paper: 1164)")
+    p.add_argument("--iterations", type=int)
+    p.add_argument("--min-cos-view", type=float, help="keep observations with r.n above this (default 0.5)")
+    p.add_argument("--diffuse-light", choices=DIFFUSE_LIGHTS)
+    p.add_argument("--defilter-order", type=int)
+    p.add_argument("--phong-exponent", type=float)
+    p.add_argument("--specular-model", choices=SPECULAR_MODELS,
+                   help="mirror (the paper) or lobe (exact cut Phong lobe, needs --phong-exponent)")
+    p.add_argument("--variant", choices=VARIANTS + ("auto",))
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pseudolight", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -94,6 +194,23 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--overwrite", action="store_true", help="replace an existing dataset folder")
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     g.set_defaults(func=cmd_generate)
+
+    e = sub.add_parser("estimate", help="estimate albedo and pseudo illumination from a dataset")
+    e.add_argument("dataset")
+    e.add_argument("-o", "--output", required=True, help="run folder to create")
+    e.add_argument("--overwrite", action="store_true")
+    _add_estimator_flags(e)
+    e.set_defaults(func=cmd_estimate)
+
+    r = sub.add_parser("render", help="predict images of a dataset's cameras from an estimate")
+    r.add_argument("run")
+    r.add_argument("--dataset", help="dataset folder (default: the one the run was made from)")
+    r.add_argument("-o", "--output", required=True)
+    r.add_argument("--frames", choices=("test", "train", "all"), default="test")
+    r.add_argument("--rotate-illumination", nargs=2, metavar=("AXIS", "DEG"),
+                   help="turn the pseudo illumination about x, y or z by DEG degrees")
+    r.add_argument("--overwrite", action="store_true")
+    r.set_defaults(func=cmd_render)
 
     d = sub.add_parser("demo", help="the main job on the default scene (earth-specular)")
     d.add_argument("-o", "--output", default="out")

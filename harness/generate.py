@@ -99,7 +99,7 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         test = scene.render(test_cams, desc=f"{spec.name} test")
         t2 = time.perf_counter()
         meta = {"scene": spec.name, "generator": "pseudolight", "variant": backend.active_variant(),
-                "spp": spec.render.spp, "seed": spec.seed}
+                "spp": spec.render.spp, "seed": spec.seed, "estimator_defaults": spec.estimator}
         write_dataset(tmp, scene.mesh, list(zip(train_cams, train)), list(zip(test_cams, test)), meta,
                       half=spec.render.half)
         truth = scene.ground_truth()

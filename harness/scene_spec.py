@@ -252,6 +252,7 @@ class SceneSpec:
     illumination: IlluminationSpec = field(default_factory=IlluminationSpec)
     cameras: CameraSpec = field(default_factory=CameraSpec)
     render: RenderSpec = field(default_factory=RenderSpec)
+    estimator: dict = field(default_factory=dict)
     profiles: dict = field(default_factory=dict)
     path: str | None = None
 
@@ -259,6 +260,26 @@ class SceneSpec:
 def _build(where: str, raw: dict, cls):
     _check_keys(where, raw, cls)
     return cls(**raw)
+
+
+def _estimator_defaults(raw: dict) -> dict:
+    """The spec's [estimator] table: estimator settings recommended for this scene."""
+    from estimator.config import EstimatorConfig
+    from estimator.methods import REGISTRY
+
+    if not isinstance(raw, dict):
+        raise SpecError("estimator must be a table")
+    allowed = {f.name for f in dataclasses.fields(EstimatorConfig)} | {"method"}
+    unknown = sorted(set(raw) - allowed)
+    if unknown:
+        raise SpecError(f"unknown key(s) {', '.join('estimator.' + k for k in unknown)}")
+    if "method" in raw and raw["method"] not in REGISTRY:
+        raise SpecError(f"estimator.method {raw['method']!r} is not a registered method ({', '.join(REGISTRY)})")
+    try:
+        EstimatorConfig(**{k: v for k, v in raw.items() if k != "method"})
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"estimator: {exc}") from exc
+    return dict(raw)
 
 
 def apply_overrides(raw: dict, overrides: dict[str, Any]) -> dict:
@@ -313,6 +334,7 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
         illumination=IlluminationSpec(**ill),
         cameras=_build("cameras", raw.get("cameras", {}), CameraSpec),
         render=_build("render", raw.get("render", {}), RenderSpec),
+        estimator=_estimator_defaults(raw.get("estimator", {})),
         profiles=profiles,
     )
     spec.geometry.validate(base_dir)

@@ -22,7 +22,7 @@ def _generate(tmp_path_factory, scene: str, **overrides):
 
 @pytest.fixture(scope="session")
 def tiny_earth(tmp_path_factory) -> str:
-    """earth-specular at the 'tiny' profile: 320 faces, 12 views of 64x64."""
+    """earth-specular at the 'tiny' profile: 1280 faces, 16 views of 96x96, spp 1."""
     return _generate(tmp_path_factory, "earth-specular")
 
 
@@ -30,6 +30,18 @@ def tiny_earth(tmp_path_factory) -> str:
 def tiny_sparse(tmp_path_factory) -> str:
     """sparse-colored at the 'tiny' profile: 1280 faces, 16 views of 96x96."""
     return _generate(tmp_path_factory, "sparse-colored")
+
+
+@pytest.fixture(scope="session")
+def tiny_earth_data(tiny_earth):
+    from harness.dataset import read_dataset
+    return read_dataset(tiny_earth)
+
+
+@pytest.fixture(scope="session")
+def tiny_sparse_data(tiny_sparse):
+    from harness.dataset import read_dataset
+    return read_dataset(tiny_sparse)
 
 
 @pytest.fixture

@@ -121,10 +121,10 @@ def test_interrupted_generation_leaves_no_dataset(tmp_path, monkeypatch):
 
 def test_generated_tiny_dataset_is_complete(tiny_earth):
     ds = read_dataset(tiny_earth)
-    assert ds.meta["scene"] == "earth-specular" and len(ds.data.views) == 12 and len(ds.data.test_views) == 2
+    assert ds.meta["scene"] == "earth-specular" and len(ds.data.views) == 16 and len(ds.data.test_views) == 2
     gt = ds.ground_truth
     assert gt.brdf == {"model": "phong", "exponent": 10.0}
-    assert np.all(gt.diffuse == 0) and gt.specular.shape == (320, 3) and gt.specular.max() > 0.2
+    assert np.all(gt.diffuse == 0) and gt.specular.shape == (1280, 3) and gt.specular.max() > 0.2
     assert gt.sh_order >= 10 and len(gt.illumination["lights"]) == 40
     coverage = np.mean([v.alpha.mean() for v in ds.data.views])
     assert 0.2 < coverage < 0.8

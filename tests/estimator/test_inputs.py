@@ -1,0 +1,68 @@
+"""Bad inputs give clear errors; observations are gathered exactly."""
+import numpy as np
+import pytest
+
+from estimator.camera import Camera, look_at
+from estimator.config import EstimatorConfig
+from estimator.data import MultiViewData, TriangleMesh, View
+from estimator.methods import estimate
+from estimator.observations import Observations, gather_observations
+from estimator.raycast import RayCaster
+from harness.geometry import icosphere
+
+CAM = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, 16, 12)
+
+
+def test_mesh_errors():
+    with pytest.raises(ValueError, match="no faces"):
+        TriangleMesh(np.zeros((3, 3)), np.zeros((0, 3), int))
+    with pytest.raises(ValueError, match="triangles"):
+        TriangleMesh(np.zeros((4, 3)), np.array([[0, 1, 2, 3]]))
+    with pytest.raises(ValueError, match="indices"):
+        TriangleMesh(np.zeros((3, 3)), np.array([[0, 1, 5]]))
+    with pytest.raises(ValueError, match="NaN"):
+        TriangleMesh(np.full((3, 3), np.nan), np.array([[0, 1, 2]]))
+
+
+def test_view_errors():
+    with pytest.raises(ValueError, match="intrinsics say 16x12"):
+        View("a", CAM, np.zeros((10, 16, 3)))
+    bad = np.zeros((12, 16, 3))
+    bad[1, 1, 1] = np.inf
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        View("a", CAM, bad)
+    with pytest.raises(ValueError, match="no frames"):
+        MultiViewData(icosphere(1), [])
+
+
+def test_cameras_that_see_nothing_are_refused():
+    away = Camera.from_fov(look_at([0, 0, 4], [0, 0, 8]), 30, 16, 12)
+    data = MultiViewData(icosphere(1), [View("away", away, np.zeros((12, 16, 3)))])
+    with pytest.raises(ValueError, match="no camera sees any face"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+
+
+def test_observations_are_per_face_means_of_pure_pixels():
+    mesh = icosphere(1)
+    caster = RayCaster(mesh)
+    cam = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, 64, 64)
+    ids = caster.face_id_buffer(cam)
+    pure = caster.pure_face_buffer(cam)
+    assert np.all((pure == ids) | (pure == -1)) and (pure >= 0).sum() < (ids >= 0).sum()
+    image = np.where(ids[..., None] >= 0, (ids[..., None] + 1.0) * [1.0, 2.0, 3.0], 0.0)  # face-constant colour
+    obs = gather_observations(caster, [View("v", cam, image)])
+    np.testing.assert_allclose(obs.rgb, (obs.face[:, None] + 1.0) * [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(np.linalg.norm(obs.view_dir, axis=1), 1.0)
+
+
+def test_median_colour_matches_numpy():
+    rng = np.random.default_rng(0)
+    face = rng.integers(0, 7, 60)
+    rgb = rng.random((60, 3))
+    obs = Observations(face, np.zeros(60, int), rgb, np.ones(60, int), np.zeros((60, 3)), 9, 1)
+    med = obs.median_color()
+    for f in range(9):
+        if (face == f).any():
+            np.testing.assert_allclose(med[f], np.median(rgb[face == f], axis=0))
+        else:
+            assert np.all(np.isnan(med[f]))

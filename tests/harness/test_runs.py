@@ -1,0 +1,42 @@
+import json
+import os
+
+import numpy as np
+
+from harness.cli import main
+from harness.exr import read_exr
+from harness.runs import read_run
+
+
+def test_estimate_and_render_commands(tiny_earth, tmp_path, capsys):
+    run = tmp_path / "run"
+    # the dataset recommends bilinear-per-face with specular components (earth-specular's [estimator])
+    assert main(["estimate", tiny_earth, "-o", str(run), "--directions", "300", "--sh-order", "6"]) == 0
+    assert sorted(os.listdir(run)) == ["estimate.npz", "illumination.exr", "run.json"]
+    meta = json.load(open(run / "run.json"))
+    assert meta["method"] == "bilinear-per-face" and meta["parameters"]["components"] == "specular"
+    assert meta["parameters"]["sh_order"] == 6 and set(meta["timings"]) >= {"observations", "visibility", "solve"}
+    assert meta["versions"]["mitsuba"] == "3.9.1" and meta["residuals"][-1] < meta["residuals"][0]
+    est, _ = read_run(str(run))
+    assert est.sh.shape == (49, 3) and est.specular.shape == (1280, 3) and est.observed.dtype == bool
+    env = read_exr(run / "illumination.exr")
+    assert env.shape == (128, 256, 3) and env.min() >= 0
+    # a second run into the same folder is refused; the first stays intact
+    assert main(["estimate", tiny_earth, "-o", str(run), "--method", "median-color"]) == 2
+    assert json.load(open(run / "run.json"))["method"] == "bilinear-per-face"
+    out = tmp_path / "pred"
+    assert main(["render", str(run), "-o", str(out), "--rotate-illumination", "y", "45"]) == 0
+    images = sorted(os.listdir(out))
+    assert images == ["test_000.exr", "test_001.exr"]
+    assert read_exr(out / images[0]).shape == (96, 96, 4)
+    capsys.readouterr()
+
+
+def test_estimate_errors(tiny_earth, tmp_path, capsys):
+    assert main(["estimate", str(tmp_path / "none"), "-o", str(tmp_path / "r")]) == 2
+    assert "not found" in capsys.readouterr().err
+    assert main(["estimate", tiny_earth, "-o", str(tmp_path / "r"), "--method", "nope"]) == 2
+    assert "unknown method" in capsys.readouterr().err
+    assert main(["render", str(tmp_path), "-o", str(tmp_path / "p")]) == 2
+    assert "not a run folder" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists() and not (tmp_path / "p").exists()
