@@ -12,7 +12,6 @@ import ctypes
 import glob
 import os
 import re
-import sys
 
 MIN_LLVM = 16
 VARIANTS = ("cuda_ad_rgb", "llvm_ad_rgb")
@@ -78,10 +77,8 @@ def _prepare_llvm() -> None:
             f"No libLLVM >= {MIN_LLVM} found: the llvm_ad_rgb variant would abort the process. "
             "Install one (as root: apt-get update && apt-get install libllvm19, which "
             "scripts/setup.sh does) or set DRJIT_LIBLLVM_PATH to a libLLVM >= 16.")
-    if "drjit" in sys.modules:
-        raise BackendError(
-            "drjit was imported before pseudolight chose its backend, so DRJIT_LIBLLVM_PATH "
-            f"cannot take effect; set DRJIT_LIBLLVM_PATH={path} in the environment.")
+    # Dr.Jit loads libLLVM when the LLVM backend is first used, not at import,
+    # so setting the variable here takes effect even if drjit is already imported.
     os.environ["DRJIT_LIBLLVM_PATH"] = path
 
 

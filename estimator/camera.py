@@ -114,12 +114,12 @@ class Camera:
         origins : (H*W, 3) float64
         directions : (H*W, 3) float64, unit length, world space.
         """
-        cols, rows = np.meshgrid(np.arange(self.width) + 0.5, np.arange(self.height) + 0.5)
-        d_cam = np.stack([(cols.ravel() - self.cx) / self.fx,
-                          -(rows.ravel() - self.cy) / self.fy,
-                          -np.ones(cols.size)], axis=1)
-        d = d_cam @ self.c2w[:3, :3].T
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        x = (np.arange(self.width) + 0.5 - self.cx) / self.fx
+        y = -(np.arange(self.height) + 0.5 - self.cy) / self.fy
+        rot = self.c2w[:3, :3]
+        # world direction = x * right + y * up - forward, for every (row, col)
+        d = (y[:, None, None] * rot[:, 1] + x[None, :, None] * rot[:, 0] - rot[:, 2]).reshape(-1, 3)
+        d /= np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
         return np.broadcast_to(self.center, d.shape).copy(), d
 
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -72,8 +72,9 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     f = mesh.num_faces
     centroids = mesh.centroids
     parts = []
-    for index, view in enumerate(views):
-        ids = (caster.pure_face_buffer if pure_pixels else caster.face_id_buffer)(view.camera).ravel()
+    buffers = caster.face_id_buffers([v.camera for v in views], pure=pure_pixels)
+    for index, (view, ids) in enumerate(zip(views, buffers)):
+        ids = ids.ravel()
         valid = ids >= 0
         if view.alpha is not None:
             valid &= view.alpha.ravel() >= min_alpha

@@ -85,20 +85,37 @@ class RayCaster:
 
     def face_id_buffer(self, camera: Camera) -> np.ndarray:
         """(H, W) int64 face seen through each pixel centre, -1 for background."""
-        o, d = camera.pixel_rays()
-        return self.first_hit_faces(o, d).reshape(camera.height, camera.width)
+        return self.face_id_buffers([camera], pure=False)[0]
 
-    def pure_face_buffer(self, camera: Camera) -> np.ndarray:
-        """(H, W) face seen through each pixel centre, -1 where the pixel is background
-        *or* not covered by that face alone (a pixel corner ray hits another face or
-        nothing). Pure pixels carry one face's colour even with antialiased images."""
-        centre = self.face_id_buffer(camera)
-        corner_cam = Camera(camera.c2w, camera.fx, camera.fy, camera.cx + 0.5, camera.cy + 0.5,
-                            camera.width + 1, camera.height + 1)
-        corners = self.face_id_buffer(corner_cam)      # (H+1, W+1): ray through each pixel corner
-        pure = ((corners[:-1, :-1] == centre) & (corners[1:, :-1] == centre)
-                & (corners[:-1, 1:] == centre) & (corners[1:, 1:] == centre))
-        return np.where(pure, centre, -1)
+    def face_id_buffers(self, cameras: list[Camera], pure: bool = False) -> list[np.ndarray]:
+        """Face-ID buffers of many cameras, traced in one batched call.
+
+        With ``pure=True`` a pixel keeps its face only when the rays through its
+        four corners hit that same face (-1 otherwise): such pixels are covered by
+        one face alone, so their colour is that face's even in antialiased images.
+
+        Returns
+        -------
+        list of (H, W) int64 arrays, -1 for background (or impure pixels).
+        """
+        grids = []
+        for cam in cameras:
+            grids.append(cam)
+            if pure:  # an (H+1) x (W+1) grid of rays through the pixel corners
+                grids.append(Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5,
+                                    cam.width + 1, cam.height + 1))
+        rays = [g.pixel_rays() for g in grids]
+        ids = self.first_hit_faces(np.concatenate([o for o, _ in rays]), np.concatenate([d for _, d in rays]))
+        buffers = np.split(ids, np.cumsum([g.width * g.height for g in grids])[:-1])
+        buffers = [b.reshape(g.height, g.width) for b, g in zip(buffers, grids)]
+        if not pure:
+            return buffers
+        out = []
+        for centre, corners in zip(buffers[0::2], buffers[1::2]):
+            same = ((corners[:-1, :-1] == centre) & (corners[1:, :-1] == centre)
+                    & (corners[:-1, 1:] == centre) & (corners[1:, 1:] == centre))
+            out.append(np.where(same, centre, -1))
+        return out
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(N,) bool: True when the ray (N, 3) x (N, 3) hits any geometry."""

@@ -64,28 +64,47 @@ class Visibility:
         return ((byte >> (7 - (directions & 7))) & 1).astype(bool)
 
 
-def compute_visibility(caster: RayCaster, sampling: SphereSampling, max_rays: int = 4_000_000,
+def compute_visibility(caster: RayCaster, sampling: SphereSampling, max_rays: int = 8_000_000,
                        offset: float = 1e-4, progress=None) -> Visibility:
     """Shadow rays from every face centroid to every direction of its upper hemisphere.
 
     Rays start at the centroid moved ``offset`` x (bounding-box diagonal) along
-    the normal. Faces are processed in chunks of at most ``max_rays`` rays, so
+    the normal. Everything runs in Dr.Jit: the (face, direction) pairs of each
+    chunk are enumerated from the lane index, the upper-hemisphere pairs are
+    compacted (``dr.compress``, so the tracer gets only real rays), traced with
+    ``scene.ray_test``, and scattered back; no per-ray array is built in
+    Python. Faces are processed in chunks of at most ``max_rays`` pairs, so
     memory stays bounded; the result is stored as bits (F x K / 8 bytes).
     """
+    mi = caster.mi
+    import drjit as dr
+
     mesh: TriangleMesh = caster.mesh
-    normals, centroids = mesh.face_normals, mesh.centroids
-    eps = offset * caster.scale
+    normals = mesh.face_normals
+    origins = mesh.centroids + offset * caster.scale * normals
     k = len(sampling.directions)
+
+    def vec(cls, a):
+        return cls(*(np.ascontiguousarray(a[:, i], dtype=np.float32) for i in range(3)))
+
+    o_all, n_all, d_all = vec(mi.Point3f, origins), vec(mi.Vector3f, normals), vec(mi.Vector3f, sampling.directions)
     bits = np.zeros((mesh.num_faces, (k + 7) // 8), dtype=np.uint8)
-    chunk = max(1, max_rays // max(1, k // 2))
+    chunk = max(1, max_rays // k)
     for start in range(0, mesh.num_faces, chunk):
         stop = min(start + chunk, mesh.num_faces)
-        up = normals[start:stop] @ sampling.directions.T > 0.0           # (n, K)
-        fi, di = np.nonzero(up)
-        origins = centroids[start:stop][fi] + eps * normals[start:stop][fi]
-        vis = np.zeros_like(up)
-        vis[fi, di] = ~caster.occluded(origins, sampling.directions[di])
-        bits[start:stop] = np.packbits(vis, axis=1)
+        lanes = (stop - start) * k
+        lane = dr.arange(mi.UInt32, lanes)
+        face = lane // k + start
+        up = dr.dot(dr.gather(mi.Vector3f, n_all, face), dr.gather(mi.Vector3f, d_all, lane % k)) > 0
+        dr.eval(up)
+        pair = dr.compress(up)
+        face = pair // k + start
+        d = dr.gather(mi.Vector3f, d_all, pair % k)
+        hit = caster.scene.ray_test(mi.Ray3f(dr.gather(mi.Point3f, o_all, face), d))
+        visible = dr.zeros(mi.Bool, lanes)
+        dr.scatter(visible, ~hit, pair)
+        visible = np.asarray(visible, dtype=bool).reshape(stop - start, k)
+        bits[start:stop] = np.packbits(visible, axis=1)
         if progress is not None:
             progress(stop - start)
     return Visibility(bits, k)

@@ -47,7 +47,7 @@ def test_observations_are_per_face_means_of_pure_pixels():
     caster = RayCaster(mesh)
     cam = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, 64, 64)
     ids = caster.face_id_buffer(cam)
-    pure = caster.pure_face_buffer(cam)
+    pure = caster.face_id_buffers([cam], pure=True)[0]
     assert np.all((pure == ids) | (pure == -1)) and (pure >= 0).sum() < (ids >= 0).sum()
     image = np.where(ids[..., None] >= 0, (ids[..., None] + 1.0) * [1.0, 2.0, 3.0], 0.0)  # face-constant colour
     obs = gather_observations(caster, [View("v", cam, image)])
