@@ -15,7 +15,7 @@ from estimator.backend import VARIANTS, BackendError
 from .atomic import OutputExistsError
 from .dataset import DatasetError
 from .runs import RunError
-from .scene_spec import SpecError, load_spec, resolve_scene, shipped_scenes
+from .scene_spec import SCENES_DIR, SpecError, load_spec, resolve_scene, shipped_scenes
 
 DEFAULT_SCENE = "earth-specular"
 USER_ERRORS = (RunError, SpecError, DatasetError, BackendError, OutputExistsError, FileNotFoundError, ValueError)
@@ -62,19 +62,99 @@ def cmd_generate(args) -> int:
     return 0
 
 
+def _load_baseline(path: str | None) -> dict | None:
+    if path is None:
+        return None
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"baseline not found: {path}")
+    with open(path) as f:
+        return json.load(f)
+
+
+def _report_exit(metrics: dict, regressions, out: str) -> int:
+    from .reporting import terminal_summary
+
+    print(terminal_summary(metrics))
+    print(f"report: {os.path.abspath(os.path.join(out, 'report.html'))}")
+    cc = metrics.get("mitsuba_cross_check") or {}
+    if cc.get("pass") is False:
+        print(f"warning: the Mitsuba re-render differs from the forward model by more than {cc['tolerance']}")
+    if regressions is None:
+        return 0
+    worse = [r for r in regressions if r["status"] != "ok"]
+    for r in worse:
+        now = "missing" if r["current"] is None else f"{r['current']:.4g}"
+        print(f"REGRESSION {r['metric']}: baseline {r['baseline']:.4g}, now {now} "
+              f"({r['direction']} is better, tolerance {r['tolerance']:g})", file=sys.stderr)
+    print(f"baseline: {len(regressions) - len(worse)} of {len(regressions)} tracked metrics within tolerance")
+    return 1 if worse else 0
+
+
+def cmd_report(args) -> int:
+    from .reporting import build_report
+
+    metrics, regressions = build_report(args.run, args.output, args.dataset, tuple(args.rotate_illumination),
+                                        args.cross_check_spp, not args.no_mitsuba, _load_baseline(args.baseline),
+                                        args.overwrite, log=lambda m: print(m, file=sys.stderr))
+    if args.write_baseline:
+        from reports.regression import make_baseline
+
+        with open(args.write_baseline, "w") as f:
+            json.dump(make_baseline(metrics), f, indent=1)
+        print(f"baseline written to {args.write_baseline}")
+    return _report_exit(metrics, regressions, args.output)
+
+
+def cmd_compare(args) -> int:
+    from .reporting import compare_runs, print_table
+
+    rows = compare_runs(args.runs, args.output, overwrite=args.overwrite)
+    print_table(rows)
+    print(f"comparison: {os.path.abspath(os.path.join(args.output, 'compare.html'))}")
+    return 0
+
+
+def cmd_suite(args) -> int:
+    from .reporting import print_table
+    from .suite import load_suite, run_suite
+
+    rows = run_suite(load_suite(args.suite), args.output, args.profile, not args.no_mitsuba, args.overwrite,
+                     log=lambda m: print(m, file=sys.stderr))
+    print_table(rows)
+    print(f"comparison: {os.path.abspath(os.path.join(args.output, 'compare', 'compare.html'))}")
+    return 0
+
+
 def cmd_demo(args) -> int:
+    """Generate the default scene, estimate with its recommended method, report."""
+    from estimator import sh
+    from estimator.methods import estimate
+
+    from .dataset import read_dataset
     from .generate import generate
+    from .reporting import build_report
+    from .runs import write_run
 
     spec = load_spec(resolve_scene(DEFAULT_SCENE))
-    out = os.path.join(args.output, DEFAULT_SCENE)
+    root = os.path.join(args.output, DEFAULT_SCENE)
+    data_dir, run_dir, report_dir = (os.path.join(root, p) for p in ("dataset", "run", "report"))
     t0 = time.perf_counter()
-    if os.path.exists(out) and not args.overwrite:
-        print(f"reusing dataset {out} (pass --overwrite to render it again)")
+    if os.path.exists(data_dir) and not args.overwrite:
+        print(f"reusing dataset {data_dir} (pass --overwrite to render it again)")
     else:
-        summary = generate(spec, out, overwrite=args.overwrite, variant=args.variant)
+        summary = generate(spec, data_dir, overwrite=args.overwrite, variant=args.variant)
         print(f"generated {DEFAULT_SCENE}: {summary['views']} views in {summary['seconds']['total']:.1f} s")
-    print(f"dataset: {os.path.abspath(out)}  ({time.perf_counter() - t0:.1f} s, peak {_peak_rss_mib():.0f} MiB)")
-    return 0
+    ds = read_dataset(data_dir, load_test=False)
+    method, config = resolve_estimator(argparse.Namespace(method=None, variant=args.variant), ds.meta)
+    est = estimate(ds.data, method, config)
+    write_run(run_dir, est, data_dir, overwrite=True, extra={"scene": ds.meta.get("scene")})
+    print(f"estimated with {method} ({config.components}) in {est.info['timings']['total']:.1f} s")
+    baseline = os.path.join(SCENES_DIR, "baselines", f"{DEFAULT_SCENE}.json")
+    metrics, regressions = build_report(run_dir, report_dir, data_dir, overwrite=True,
+                                        baseline=_load_baseline(baseline) if os.path.isfile(baseline) else None,
+                                        log=lambda m: print(m, file=sys.stderr))
+    print(f"total {time.perf_counter() - t0:.1f} s, peak {_peak_rss_mib():.0f} MiB")
+    return _report_exit(metrics, regressions, report_dir)
 
 
 CONFIG_FLAGS = {  # CLI flag -> EstimatorConfig field
@@ -211,6 +291,33 @@ def build_parser() -> argparse.ArgumentParser:
                    help="turn the pseudo illumination about x, y or z by DEG degrees")
     r.add_argument("--overwrite", action="store_true")
     r.set_defaults(func=cmd_render)
+
+    rp = sub.add_parser("report", help="compare a run with its dataset's ground truth: metrics, figures, HTML")
+    rp.add_argument("run")
+    rp.add_argument("--dataset", help="dataset folder (default: the one the run was made from)")
+    rp.add_argument("-o", "--output", required=True, help="report folder to create")
+    rp.add_argument("--baseline", help="metrics baseline JSON: exit 1 naming each metric that got worse")
+    rp.add_argument("--write-baseline", metavar="FILE", help="store this report's tracked metrics as a baseline")
+    rp.add_argument("--rotate-illumination", nargs=2, metavar=("AXIS", "DEG"), default=["y", "90"],
+                    help="relighting test: turn the light about x, y or z (default: y 90)")
+    rp.add_argument("--cross-check-spp", type=int, default=64, help="spp of the Mitsuba re-render")
+    rp.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba re-render cross-check")
+    rp.add_argument("--overwrite", action="store_true")
+    rp.set_defaults(func=cmd_report)
+
+    cp = sub.add_parser("compare", help="one table and overlaid histograms over several reports")
+    cp.add_argument("runs", nargs="+", help="report folders (or run folders holding report/)")
+    cp.add_argument("-o", "--output", required=True)
+    cp.add_argument("--overwrite", action="store_true")
+    cp.set_defaults(func=cmd_compare)
+
+    su = sub.add_parser("suite", help="benchmark runner: scenes x methods -> datasets, runs, reports, comparison")
+    su.add_argument("suite", help="suite TOML, or a name under scenes/suites/ (e.g. methods)")
+    su.add_argument("-o", "--output", required=True)
+    su.add_argument("--profile", help="scene profile for every dataset (e.g. tiny, benchmark)")
+    su.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba cross-check in the reports")
+    su.add_argument("--overwrite", action="store_true", help="render the datasets again")
+    su.set_defaults(func=cmd_suite)
 
     d = sub.add_parser("demo", help="the main job on the default scene (earth-specular)")
     d.add_argument("-o", "--output", default="out")

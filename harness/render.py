@@ -10,7 +10,7 @@ from estimator.data import TriangleMesh
 from estimator.raycast import mitsuba_mesh
 from estimator.sh import axis_angle_matrix, fibonacci_sphere
 
-from . import direct_integrator, phong_bsdf
+from . import diffuse_mirror_bsdf, direct_integrator, phong_bsdf
 from .illumination import Illumination
 from .scene_spec import CameraSpec
 
@@ -46,25 +46,30 @@ def make_cameras(spec: CameraSpec, test: bool = False) -> list[Camera]:
             for p in camera_positions(spec, test)]
 
 
-def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, exponent: float,
+def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, exponent: float | None,
                 illumination: Illumination, camera: Camera, spp: int, integrator: str = "direct",
                 max_depth: int = 6):
-    """A Mitsuba scene: the mesh with per-face Phong albedos, the lights, one sensor.
+    """A Mitsuba scene: the mesh with per-face albedos, the lights, one sensor.
 
     Parameters
     ----------
     diffuse, specular : (F, 3) per-face linear albedo.
+    exponent : Phong exponent of the ``pseudolight_phong`` BSDF, or None for the
+        diffuse + perfect-mirror BSDF ``pseudolight_diffuse_mirror`` (the estimator's model).
     integrator : 'direct' (deterministic loop over delta lights) or 'path'.
     """
     mi = backend.set_variant()
     phong_bsdf.register()
+    diffuse_mirror_bsdf.register()
     direct_integrator.register()
+    textures = {"diffuse_reflectance": {"type": "mesh_attribute", "name": "face_diffuse"},
+                "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular"}}
+    if exponent is None:
+        bsdf = {"type": diffuse_mirror_bsdf.PLUGIN_NAME, **textures}
+    else:
+        bsdf = {"type": phong_bsdf.PLUGIN_NAME, "exponent": float(exponent), **textures}
     props = mi.Properties()
-    props["bsdf"] = mi.load_dict({
-        "type": phong_bsdf.PLUGIN_NAME, "exponent": float(exponent),
-        "diffuse_reflectance": {"type": "mesh_attribute", "name": "face_diffuse"},
-        "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular"},
-    })
+    props["bsdf"] = mi.load_dict(bsdf)
     m = mitsuba_mesh(mesh, "object", props=props)
     m.add_attribute("face_diffuse", 3, mi.Float(np.asarray(diffuse, np.float32).ravel()))
     m.add_attribute("face_specular", 3, mi.Float(np.asarray(specular, np.float32).ravel()))

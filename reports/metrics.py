@@ -22,3 +22,139 @@ def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
     if maximum == expected:
         return 1.0
     return float((index - expected) / (maximum - expected))
+
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+SCALES = ("dc", "lstsq")
+
+
+def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, scale: str,
+                  dc: np.ndarray | None = None) -> np.ndarray:
+    """Per-face ratio estimated / true albedo, after removing one global scale.
+
+    Parameters
+    ----------
+    estimate, truth : (F, 3) linear albedo.
+    mask : (F,) faces to compare.
+    scale : 'dc' -- the estimate is in the unit-DC gauge of its illumination, so
+        the truth is brought into the same gauge by multiplying it by the DC
+        coefficient of the true illumination per channel (``dc`` (3,)); nothing is
+        fitted (the paper's normalisation). 'lstsq' -- a per-channel least-squares
+        scale s_c = sum(e t) / sum(e^2) fitted on the masked faces (Stanford-ORB).
+
+    Returns
+    -------
+    (n, 4) ratios per channel R, G, B and of the luminance, for the n masked faces.
+    """
+    e, t = np.asarray(estimate, float)[mask], np.asarray(truth, float)[mask]
+    if scale == "dc":
+        if dc is None:
+            raise ValueError("scale 'dc' needs the DC coefficient of the true illumination")
+        t = t * np.asarray(dc, float)[None]
+    elif scale == "lstsq":
+        s = np.sum(e * t, axis=0) / np.maximum(np.sum(e * e, axis=0), 1e-300)
+        e = e * s[None]
+    else:
+        raise ValueError(f"scale must be one of {SCALES}, got {scale!r}")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_channel = np.where(t > 0, e / t, np.nan)
+        lum = (e @ LUMINANCE) / (t @ LUMINANCE)
+    return np.column_stack([per_channel, lum])
+
+
+def ratio_summary(ratios: np.ndarray) -> dict:
+    """Median, inter-quartile range and share within +-5 % / +-10 % of finite ratios (n,)."""
+    r = np.asarray(ratios, float)
+    r = r[np.isfinite(r)]
+    if r.size == 0:
+        return {"count": 0, "median_ratio": None, "iqr": None, "within_5": None, "within_10": None}
+    q1, med, q3 = np.percentile(r, [25, 50, 75])
+    return {"count": int(r.size), "median_ratio": float(med), "iqr": float(q3 - q1),
+            "within_5": float(np.mean(np.abs(r - 1) <= 0.05)), "within_10": float(np.mean(np.abs(r - 1) <= 0.10))}
+
+
+def sh_comparison(estimate: np.ndarray, truth: np.ndarray) -> dict:
+    """Relative L2 error and per-band energy of two SH sets ((L + 1)^2, C), same gauge."""
+    e, t = np.asarray(estimate, float), np.asarray(truth, float)
+    if e.shape != t.shape:
+        raise ValueError(f"SH shapes differ: {e.shape} vs {t.shape}")
+    order = int(round(np.sqrt(e.shape[0]))) - 1
+    band = np.repeat(np.arange(order + 1), 2 * np.arange(order + 1) + 1)
+    energy = lambda c: [float(np.sum(c[band == l] ** 2)) for l in range(order + 1)]  # noqa: E731
+    err = [float(np.linalg.norm((e - t)[band == l]) / max(np.linalg.norm(t[band == l]), 1e-300))
+           for l in range(order + 1)]
+    return {"sh_order": order, "relative_l2": float(np.linalg.norm(e - t) / max(np.linalg.norm(t), 1e-300)),
+            "band_energy_estimate": energy(e), "band_energy_truth": energy(t), "band_relative_l2": err}
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """sRGB transfer function of linear values clipped to [0, 1]."""
+    x = np.clip(linear, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def tonemap(linear: np.ndarray, exposure: float) -> np.ndarray:
+    """The report's tone map: sRGB encoding of min(1, x / exposure)."""
+    return srgb_encode(np.asarray(linear, float) / max(exposure, 1e-300))
+
+
+def align_scale(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per-channel least-squares scale of ``prediction`` onto ``reference`` over ``mask`` (H, W)."""
+    p, r = prediction[mask], reference[mask]
+    s = np.sum(p * r, axis=0) / np.maximum(np.sum(p * p, axis=0), 1e-300)
+    return prediction * s[None, None]
+
+
+def psnr(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
+    """PSNR (dB) over the masked pixels with the given peak; capped at 100 dB for identical images."""
+    mse = float(np.mean((prediction[mask] - reference[mask]) ** 2))
+    return 100.0 if mse <= peak * peak * 1e-10 else float(10 * np.log10(peak * peak / mse))
+
+
+def ssim(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
+    """Mean SSIM (Wang et al. 2004: Gaussian window sigma 1.5, K1 0.01, K2 0.03), per channel,
+    averaged over the masked pixels."""
+    from scipy.ndimage import gaussian_filter
+
+    c1, c2 = (0.01 * peak) ** 2, (0.03 * peak) ** 2
+    values = []
+    for ch in range(prediction.shape[2]):
+        x, y = prediction[..., ch].astype(np.float64), reference[..., ch].astype(np.float64)
+        blur = lambda a: gaussian_filter(a, 1.5, truncate=3.5)  # noqa: E731
+        mx, my = blur(x), blur(y)
+        sxx, syy, sxy = blur(x * x) - mx * mx, blur(y * y) - my * my, blur(x * y) - mx * my
+        s = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx * mx + my * my + c1) * (sxx + syy + c2))
+        values.append(s[mask])
+    return float(np.mean(values))
+
+
+def image_metrics(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, align: bool = True) -> dict:
+    """PSNR, SSIM and relative L2 of a predicted linear image against a reference, on the object's pixels.
+
+    With ``align`` the prediction is first scaled per channel by least squares
+    over the mask (the estimate's albedo/light scale is a gauge). 'linear': HDR values, peak = max of the reference. 'srgb':
+    both tone mapped with exposure = 99th percentile of the reference's
+    masked values, peak 1.
+    """
+    if not mask.any():
+        raise ValueError("no pixel to compare: the object covers none of the reference image")
+    pred = align_scale(prediction, reference, mask) if align else prediction
+    peak = float(reference[mask].max())
+    exposure = float(np.percentile(reference[mask], 99))
+    tp, tr = tonemap(pred, exposure), tonemap(reference, exposure)
+    return {"psnr_linear": psnr(pred, reference, mask, peak), "ssim_linear": ssim(pred, reference, mask, peak),
+            "psnr_srgb": psnr(tp, tr, mask, 1.0), "ssim_srgb": ssim(tp, tr, mask, 1.0),
+            "relative_l2": float(np.linalg.norm(pred[mask] - reference[mask]) / np.linalg.norm(reference[mask]))}
+
+
+def ciede2000(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """CIEDE2000 colour difference of linear Rec.709 albedos (N, 3) (D65, 2 degree observer)."""
+    import colour
+
+    space = colour.RGB_COLOURSPACES["ITU-R BT.709"]
+    white = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+
+    def lab(rgb):
+        return colour.XYZ_to_Lab(colour.RGB_to_XYZ(np.clip(rgb, 0, None), space, apply_cctf_decoding=False), white)
+
+    return np.asarray(colour.delta_E(lab(estimate), lab(truth), method="CIE 2000"), dtype=np.float64)

@@ -1,0 +1,113 @@
+"""All the numbers of a report: one estimate against one synthetic dataset's ground truth."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimator.data import GroundTruth, TriangleMesh
+from estimator.methods import Estimate
+
+from . import metrics
+from .ground_truth import evaluation_mask, filtered_illumination
+
+SCHEMA = "pseudolight-metrics"
+SCHEMA_VERSION = 1
+
+
+@dataclass
+class ImageSet:
+    """Predicted and reference images of some cameras (a novel-view, relighting or cross-check set).
+
+    predictions, references : lists of (H, W, 3) linear images; masks : lists of (H, W) bool
+    pixels to compare (object pixels); names : one per image. ``align``: scale the
+    predictions per channel onto the references first (False for the cross-check,
+    where the absolute scale must agree).
+    """
+
+    names: list[str]
+    predictions: list[np.ndarray]
+    references: list[np.ndarray]
+    masks: list[np.ndarray]
+    align: bool = True
+    note: str = ""
+
+    def metrics(self) -> dict:
+        per_view = [metrics.image_metrics(p, r, m, self.align)
+                    for p, r, m in zip(self.predictions, self.references, self.masks)]
+        keys = per_view[0].keys() if per_view else []
+        out = {k: float(np.mean([v[k] for v in per_view])) for k in keys}
+        out["views"] = len(per_view)
+        out["per_view"] = [{"name": n, **v} for n, v in zip(self.names, per_view)]
+        if self.note:
+            out["note"] = self.note
+        return out
+
+
+@dataclass
+class Evaluation:
+    """The metrics dict plus the arrays the figures need."""
+
+    metrics: dict
+    ratios: dict = field(default_factory=dict)          # 'specular'/'diffuse' -> (n, 4) DC-gauge ratios
+    filtered_truth_sh: np.ndarray | None = None
+    masks: dict = field(default_factory=dict)
+
+
+def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: ImageSet | None = None,
+             relit: ImageSet | None = None, cross_check: ImageSet | None = None,
+             cross_check_tolerance: float = 0.01) -> Evaluation:
+    """Compare an estimate with ground truth the way the paper and today's benchmarks do.
+
+    Albedos are compared per face as ratios estimated / true after one global
+    scale, in two ways (see :func:`reports.metrics.albedo_ratios`): 'dc' (the
+    paper's unit-DC normalisation, nothing fitted) and 'lstsq' (per-channel
+    least-squares scale, as Stanford-ORB), on the faces of
+    :func:`reports.ground_truth.evaluation_mask`.
+    """
+    truth_sh = filtered_illumination(truth, est.sh_order)
+    dc = truth.sh[0]  # DC of the true radiance per channel (the Phong filter is 1 at l = 0)
+    out: dict = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION}
+    out["illumination"] = metrics.sh_comparison(est.sh, truth_sh)
+    out["faces"] = {"total": int(mesh.num_faces), "estimated": int(est.observed.sum())}
+    ratios, masks, albedo = {}, {}, {}
+    for component in ("specular", "diffuse"):
+        true_albedo = getattr(truth, component)
+        est_albedo = getattr(est, component)
+        if np.all(true_albedo == 0):
+            albedo[component] = {"present": False}
+            continue
+        mask = evaluation_mask(mesh, truth, est.observed, component)
+        masks[component] = mask
+        entry = {"present": True, "evaluated_faces": int(mask.sum())}
+        for scale in metrics.SCALES:
+            r = metrics.albedo_ratios(est_albedo, true_albedo, mask, scale, dc)
+            entry[scale] = {"luminance": metrics.ratio_summary(r[:, 3]),
+                            "median_ratio_rgb": [metrics.ratio_summary(r[:, c])["median_ratio"] for c in range(3)]}
+            if scale == "dc":
+                ratios[component] = r
+        s = np.sum(est_albedo[mask] * true_albedo[mask], 0) / np.maximum(np.sum(est_albedo[mask] ** 2, 0), 1e-300)
+        de = metrics.ciede2000(est_albedo[mask] * s, true_albedo[mask]) if mask.any() else np.zeros(0)
+        entry["ciede2000"] = {"mean": float(de.mean()) if de.size else None,
+                              "median": float(np.median(de)) if de.size else None,
+                              "p90": float(np.percentile(de, 90)) if de.size else None}
+        albedo[component] = entry
+    out["albedo"] = albedo
+    if truth.regions is not None:
+        o = est.observed & (est.labels >= 0)
+        out["clusters"] = {"ari": metrics.adjusted_rand_index(truth.regions[o], est.labels[o]) if o.any() else None,
+                           "clusters": int(len(np.unique(est.labels[o]))),
+                           "true_regions": int(len(np.unique(truth.regions)))}
+    else:
+        out["clusters"] = {"ari": None, "clusters": int(len(np.unique(est.labels[est.labels >= 0]))),
+                           "true_regions": None}
+    for key, images in (("novel_views", novel), ("relighting", relit)):
+        out[key] = images.metrics() if images is not None and images.names else None
+    if cross_check is not None and cross_check.names:
+        cc = cross_check.metrics()
+        cc["tolerance"] = cross_check_tolerance
+        cc["pass"] = bool(max(v["relative_l2"] for v in cc["per_view"]) <= cross_check_tolerance)
+        out["mitsuba_cross_check"] = cc
+    else:
+        out["mitsuba_cross_check"] = None if cross_check is None else {"note": cross_check.note}
+    return Evaluation(out, ratios, truth_sh, masks)

@@ -1,0 +1,139 @@
+"""Figures of a report (matplotlib, Agg): each function returns PNG bytes."""
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from estimator import latlong, sh  # noqa: E402
+from estimator.camera import Camera  # noqa: E402
+from estimator.raycast import RayCaster  # noqa: E402
+
+from .metrics import LUMINANCE, tonemap  # noqa: E402
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _show(ax, image, title):
+    ax.imshow(np.clip(image, 0, 1), interpolation="nearest")
+    ax.set_title(title, fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def illumination(estimate_sh: np.ndarray, truth_sh: np.ndarray, size=(128, 256)) -> bytes:
+    """Estimated vs filtered true pseudo illumination as lat-long maps (Mitsuba envmap
+    orientation, shared exposure), and their energy per SH band (the paper's Fig. 5 a, b)."""
+    est, tru = sh.to_latlong(estimate_sh, *size), sh.to_latlong(truth_sh, *size)
+    exposure = float(np.percentile(np.maximum(tru, 0), 99.5))
+    fig, axes = plt.subplots(1, 3, figsize=(13, 2.9), gridspec_kw={"width_ratios": [2, 2, 1.3]})
+    _show(axes[0], tonemap(tru, exposure), "ground truth, Phong-filtered (unit DC)")
+    _show(axes[1], tonemap(est, exposure), "estimated pseudo illumination")
+    order = int(round(np.sqrt(estimate_sh.shape[0]))) - 1
+    band = sh.degrees(order)
+    for coeffs, label in ((truth_sh, "truth"), (estimate_sh, "estimate")):
+        axes[2].semilogy(range(order + 1), [np.sum(coeffs[band == l] ** 2) for l in range(order + 1)], "o-", label=label)
+    axes[2].set_xlabel("SH band l")
+    axes[2].set_title("energy per band", fontsize=9)
+    axes[2].legend(fontsize=8)
+    return _png(fig)
+
+
+def ratio_histograms(ratios: dict[str, np.ndarray]) -> bytes:
+    """Histograms of estimated / true albedo (luminance, DC gauge): the paper's Fig. 5e."""
+    comps = [c for c in ("specular", "diffuse") if c in ratios]
+    fig, axes = plt.subplots(1, max(1, len(comps)), figsize=(5.2 * max(1, len(comps)), 3.0), squeeze=False)
+    for ax, comp in zip(axes[0], comps):
+        r = ratios[comp][:, 3]
+        r = r[np.isfinite(r)]
+        ax.hist(np.clip(r, 0, 2), bins=np.linspace(0, 2, 101), color="#3b6ea5")
+        for x, style in ((1.0, "-"), (0.95, ":"), (1.05, ":"), (0.9, "--"), (1.1, "--")):
+            ax.axvline(x, color="k", lw=0.8, ls=style)
+        ax.set_title(f"{comp}: estimated / true ({len(r)} faces)", fontsize=9)
+        ax.set_xlabel("ratio (luminance, unit-DC gauge; clipped to [0, 2])")
+    if not comps:
+        axes[0][0].text(0.5, 0.5, "no albedo to compare", ha="center")
+    return _png(fig)
+
+
+def face_latlong(caster: RayCaster, size=(90, 180)) -> np.ndarray:
+    """(H, W) face hit by rays from the bounding-box centre outward (lat-long, envmap
+    orientation), -1 where none: the texture map of a star-shaped mesh."""
+    mesh = caster.mesh
+    centre = 0.5 * (mesh.vertices.min(0) + mesh.vertices.max(0))
+    dirs = latlong.directions(*size).reshape(-1, 3)
+    return caster.first_hit_faces(np.broadcast_to(centre, dirs.shape).copy(), dirs).reshape(size)
+
+
+def texture_maps(caster: RayCaster, estimate: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> bytes:
+    """Estimated (scaled per channel by least squares) vs true per-face albedo as lat-long maps."""
+    ids = face_latlong(caster)
+    comps = list(estimate)
+    fig, axes = plt.subplots(len(comps), 2, figsize=(10, 2.6 * len(comps)), squeeze=False)
+    for row, comp in zip(axes, comps):
+        e, t = estimate[comp], truth[comp]
+        s = np.sum(e * t, 0) / np.maximum(np.sum(e * e, 0), 1e-300)
+        top = max(float(np.percentile(t, 99.5)), 1e-6)
+        for ax, values, title in ((row[0], t, f"true {comp} albedo"), (row[1], e * s, f"estimated {comp} (scaled)")):
+            img = np.where(ids[..., None] >= 0, values[np.maximum(ids, 0)], 0.0)
+            _show(ax, tonemap(img, top), title)
+    return _png(fig)
+
+
+def _palette(n: int) -> np.ndarray:
+    rng = np.random.default_rng(12345)
+    return np.clip(0.25 + 0.75 * rng.random((max(n, 1), 3)), 0, 1)
+
+
+def clusters(caster: RayCaster, cameras: list[Camera], labels: np.ndarray, regions: np.ndarray | None) -> bytes:
+    """Faces coloured by estimated cluster (and by true region) seen from a few cameras (Fig. 3)."""
+    buffers = caster.face_id_buffers(cameras)
+    rows = [("estimated clusters", labels)] + ([("true regions", regions)] if regions is not None else [])
+    fig, axes = plt.subplots(len(rows), len(cameras), figsize=(2.6 * len(cameras), 2.6 * len(rows)), squeeze=False)
+    for (title, lab), ax_row in zip(rows, axes):
+        colours = _palette(int(lab.max()) + 2)
+        for ax, ids in zip(ax_row, buffers):
+            face_label = np.where(ids >= 0, lab[np.maximum(ids, 0)], -1)
+            img = np.where((face_label >= 0)[..., None], colours[np.maximum(face_label, 0)], 0.0)
+            img[(ids >= 0) & (face_label < 0)] = 0.35  # faces seen here but not estimated
+            _show(ax, img, title)
+    return _png(fig)
+
+
+def image_comparison(names, predictions, references, masks, title: str) -> bytes:
+    """Reference | prediction | difference, tone mapped with the reference's exposure."""
+    n = len(names)
+    fig, axes = plt.subplots(n, 3, figsize=(8.4, 2.8 * n), squeeze=False)
+    for row, name, p, r, m in zip(axes, names, predictions, references, masks):
+        exposure = float(np.percentile(r[m], 99)) if m.any() else 1.0
+        s = np.sum(p[m] * r[m], 0) / np.maximum(np.sum(p[m] ** 2, 0), 1e-300) if m.any() else np.ones(3)
+        _show(row[0], tonemap(r, exposure), f"{name}: reference")
+        _show(row[1], tonemap(p * s, exposure), f"{title}")
+        diff = np.abs(p * s - r) @ LUMINANCE / exposure
+        row[2].imshow(np.where(m, diff, 0), cmap="magma", vmin=0, vmax=0.25)
+        row[2].set_title("|difference| / exposure (0..0.25)", fontsize=9)
+        row[2].set_xticks([])
+        row[2].set_yticks([])
+    return _png(fig)
+
+
+def compare_histograms(entries: list[tuple[str, np.ndarray]], component: str) -> bytes:
+    """Overlaid ratio histograms of several runs (label, ratios (n,))."""
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for label, r in entries:
+        r = r[np.isfinite(r)]
+        ax.hist(np.clip(r, 0, 2), bins=np.linspace(0, 2, 81), histtype="step", lw=1.4, density=True, label=label)
+    ax.axvline(1.0, color="k", lw=0.8)
+    ax.set_title(f"{component} albedo: estimated / true (unit-DC gauge)", fontsize=9)
+    ax.set_xlabel("ratio (clipped to [0, 2])")
+    ax.legend(fontsize=7)
+    return _png(fig)

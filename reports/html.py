@@ -1,0 +1,127 @@
+"""Self-contained HTML pages (figures embedded as data URIs) and terminal summaries."""
+from __future__ import annotations
+
+import base64
+import html
+import json
+
+SUMMARY_ROWS = [  # (label, dotted path, format)
+    ("pseudo illumination: SH relative L2", "illumination.relative_l2", "{:.4f}"),
+    ("specular albedo within ±10 % (DC gauge)", "albedo.specular.dc.luminance.within_10", "{:.3f}"),
+    ("specular albedo within ±5 % (DC gauge)", "albedo.specular.dc.luminance.within_5", "{:.3f}"),
+    ("specular median ratio (DC gauge)", "albedo.specular.dc.luminance.median_ratio", "{:.3f}"),
+    ("specular within ±10 % (least-squares scale)", "albedo.specular.lstsq.luminance.within_10", "{:.3f}"),
+    ("specular CIEDE2000 median", "albedo.specular.ciede2000.median", "{:.2f}"),
+    ("diffuse albedo within ±10 % (DC gauge)", "albedo.diffuse.dc.luminance.within_10", "{:.3f}"),
+    ("diffuse median ratio (DC gauge)", "albedo.diffuse.dc.luminance.median_ratio", "{:.3f}"),
+    ("diffuse within ±10 % (least-squares scale)", "albedo.diffuse.lstsq.luminance.within_10", "{:.3f}"),
+    ("diffuse CIEDE2000 median", "albedo.diffuse.ciede2000.median", "{:.2f}"),
+    ("clusters: adjusted Rand index", "clusters.ari", "{:.3f}"),
+    ("clusters found", "clusters.clusters", "{}"),
+    ("novel views: PSNR sRGB (dB)", "novel_views.psnr_srgb", "{:.2f}"),
+    ("novel views: SSIM sRGB", "novel_views.ssim_srgb", "{:.4f}"),
+    ("novel views: PSNR linear (dB)", "novel_views.psnr_linear", "{:.2f}"),
+    ("relighting: PSNR sRGB (dB)", "relighting.psnr_srgb", "{:.2f}"),
+    ("relighting: SSIM sRGB", "relighting.ssim_srgb", "{:.4f}"),
+    ("Mitsuba re-render vs forward model: relative L2", "mitsuba_cross_check.relative_l2", "{:.4f}"),
+    ("faces evaluated (specular / diffuse)", None, None),
+]
+
+
+def lookup(metrics: dict, path: str):
+    """Value at a dotted path, or None when any part is missing."""
+    node = metrics
+    for key in path.split("."):
+        if not isinstance(node, dict) or node.get(key) is None:
+            return None
+        node = node[key]
+    return node
+
+
+def summary_rows(metrics: dict) -> list[tuple[str, str]]:
+    rows = []
+    for label, path, fmt in SUMMARY_ROWS:
+        if path is None:
+            spec = lookup(metrics, "albedo.specular.evaluated_faces")
+            dif = lookup(metrics, "albedo.diffuse.evaluated_faces")
+            rows.append((label, f"{spec if spec is not None else '-'} / {dif if dif is not None else '-'}"))
+            continue
+        value = lookup(metrics, path)
+        if value is not None:
+            rows.append((label, fmt.format(value)))
+    return rows
+
+
+def terminal_summary(metrics: dict) -> str:
+    rows = summary_rows(metrics)
+    width = max(len(label) for label, _ in rows)
+    head = f"{metrics.get('scene', '?')} / {metrics.get('method', '?')}"
+    return "\n".join([head, "-" * len(head)] + [f"{label:<{width}}  {value}" for label, value in rows])
+
+
+def _img(png: bytes, alt: str) -> str:
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode()}">'
+
+
+_STYLE = """body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
+table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:left}
+th{background:#f0f0f0}img{max-width:100%;margin:0.5em 0}h2{margin-top:1.6em}
+.ok{color:#176617}.bad{color:#a11}pre{background:#f6f6f6;padding:1em;overflow:auto;font-size:12px}"""
+
+
+def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regressions: list[dict] | None = None) -> str:
+    """One self-contained page: summary table, figures (section, caption, PNG bytes), raw metrics."""
+    title = f"pseudolight report: {metrics.get('scene', '?')} / {metrics.get('method', '?')}"
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+             f"<style>{_STYLE}</style></head><body><h1>{html.escape(title)}</h1>",
+             f"<p>dataset <code>{html.escape(str(metrics.get('dataset')))}</code>, run "
+             f"<code>{html.escape(str(metrics.get('run')))}</code></p>",
+             "<table><tr><th>metric</th><th>value</th></tr>"]
+    parts += [f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>" for k, v in summary_rows(metrics)]
+    parts.append("</table>")
+    cc = metrics.get("mitsuba_cross_check") or {}
+    if "pass" in cc:
+        cls = "ok" if cc["pass"] else "bad"
+        parts.append(f"<p class='{cls}'>Mitsuba cross-check {'passed' if cc['pass'] else 'FAILED'}: "
+                     f"largest relative L2 per view over pixels covered by one face "
+                     f"{max(v['relative_l2'] for v in cc['per_view']):.4f} (tolerance {cc['tolerance']})</p>")
+    if regressions is not None:
+        worse = [r for r in regressions if r["status"] != "ok"]
+        cls = "bad" if worse else "ok"
+        parts.append(f"<h2>Regression against baseline</h2><p class='{cls}'>"
+                     f"{len(worse)} of {len(regressions)} tracked metrics worse</p>" + regression_table(regressions))
+    section = None
+    for sec, caption, png in figures:
+        if sec != section:
+            parts.append(f"<h2>{html.escape(sec)}</h2>")
+            section = sec
+        parts.append(f"<figure>{_img(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
+    parts.append("<h2>All metrics</h2><pre>" + html.escape(json.dumps(metrics, indent=1)) + "</pre></body></html>")
+    return "\n".join(parts)
+
+
+def regression_table(rows: list[dict]) -> str:
+    out = ["<table><tr><th>metric</th><th>baseline</th><th>now</th><th>tolerance</th><th>status</th></tr>"]
+    for r in rows:
+        cls = "ok" if r["status"] == "ok" else "bad"
+        now = "missing" if r["current"] is None else f"{r['current']:.4g}"
+        out.append(f"<tr><td>{html.escape(r['metric'])}</td><td>{r['baseline']:.4g}</td><td>{now}</td>"
+                   f"<td>{r['direction']} is better, ±{r['tolerance']:g}</td><td class='{cls}'>{r['status']}</td></tr>")
+    return "\n".join(out + ["</table>"])
+
+
+def compare_page(rows: list[dict], columns: list[tuple[str, str]], figures: list[tuple[str, bytes]]) -> str:
+    """compare.html: one table (a row per run) and overlaid histograms."""
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>pseudolight comparison</title>"
+             f"<style>{_STYLE}</style></head><body><h1>pseudolight comparison</h1><table><tr>"]
+    parts += [f"<th>{html.escape(label)}</th>" for label, _ in columns] + ["</tr>"]
+    for row in rows:
+        cells = []
+        for _, key in columns:
+            v = row.get(key)
+            cells.append("-" if v is None else (f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))))
+        parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    parts.append("</table>")
+    for caption, png in figures:
+        parts.append(f"<figure>{_img(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
+    return "\n".join(parts + ["</body></html>"])

@@ -1,0 +1,98 @@
+import numpy as np
+import pytest
+
+from estimator import sh
+from reports import metrics
+from reports.regression import TRACKED, check, make_baseline
+
+
+def test_identical_estimate_gives_unit_ratios_and_capped_psnr():
+    rng = np.random.default_rng(0)
+    albedo = rng.uniform(0.1, 0.9, (50, 3))
+    mask = np.ones(50, bool)
+    for scale in metrics.SCALES:
+        r = metrics.albedo_ratios(albedo, albedo, mask, scale, dc=np.ones(3))
+        np.testing.assert_allclose(r, 1.0)
+    s = metrics.ratio_summary(np.ones(50))
+    assert s == {"count": 50, "median_ratio": 1.0, "iqr": 0.0, "within_5": 1.0, "within_10": 1.0}
+    image = rng.random((20, 30, 3))
+    m = np.ones((20, 30), bool)
+    out = metrics.image_metrics(image, image, m)
+    assert out["psnr_linear"] == 100.0 and out["psnr_srgb"] == 100.0
+    assert out["ssim_linear"] == pytest.approx(1.0) and out["relative_l2"] == 0.0
+
+
+def test_known_scales_are_removed():
+    rng = np.random.default_rng(1)
+    truth = rng.uniform(0.1, 0.9, (40, 3))
+    scaled = truth * np.array([2.0, 0.5, 3.0])
+    r = metrics.albedo_ratios(scaled, truth, np.ones(40, bool), "lstsq")
+    np.testing.assert_allclose(r, 1.0)
+    # DC gauge: an estimate in units where the light's DC is 1 absorbs the light's DC per channel
+    dc = np.array([0.7, 0.8, 0.9])
+    r = metrics.albedo_ratios(truth * dc, truth, np.ones(40, bool), "dc", dc=dc)
+    np.testing.assert_allclose(r, 1.0)
+    image = rng.random((16, 16, 3))
+    out = metrics.image_metrics(image * np.array([4.0, 2.0, 0.5]), image, np.ones((16, 16), bool))
+    assert out["psnr_linear"] == 100.0
+    assert metrics.image_metrics(image * 2, image, np.ones((16, 16), bool), align=False)["relative_l2"] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="scale"):
+        metrics.albedo_ratios(truth, truth, np.ones(40, bool), "median")
+
+
+def test_psnr_and_ssim_values():
+    ref = np.zeros((32, 32, 3))
+    ref[8:24, 8:24] = 1.0
+    noisy = ref + 0.1
+    m = np.ones((32, 32), bool)
+    assert metrics.psnr(noisy, ref, m, 1.0) == pytest.approx(20.0)
+    assert 0.0 < metrics.ssim(noisy, ref, m, 1.0) < 1.0
+
+
+def test_sh_comparison_and_pseudo_illumination_gauge():
+    rng = np.random.default_rng(2)
+    radiance = rng.normal(size=(169, 3))
+    radiance[0] = [2.0, 3.0, 4.0]
+    h = sh.pseudo_illumination(radiance, 10.0, 10)
+    np.testing.assert_allclose(h[0], 1.0)  # unit DC per channel
+    f = sh.phong_filter(10, 10.0)
+    np.testing.assert_allclose(h[sh.index(3, 1)], radiance[sh.index(3, 1)] * f[3] / radiance[0])
+    cmp = metrics.sh_comparison(h, h)
+    assert cmp["relative_l2"] == 0.0 and cmp["sh_order"] == 10 and len(cmp["band_energy_truth"]) == 11
+    assert metrics.sh_comparison(1.1 * h, h)["relative_l2"] == pytest.approx(0.1)
+
+
+def test_ciede2000_is_zero_for_equal_colours_and_grows():
+    a = np.array([[0.5, 0.2, 0.1], [0.1, 0.1, 0.1]])
+    np.testing.assert_allclose(metrics.ciede2000(a, a), 0.0, atol=1e-9)
+    assert np.all(metrics.ciede2000(a * 1.3, a) > 1.0)
+
+
+def _metrics(**over):
+    m = {"scene": "s", "method": "m", "illumination": {"relative_l2": 0.05},
+         "albedo": {"specular": {"dc": {"luminance": {"within_10": 0.9}}}},
+         "clusters": {"ari": 0.95}, "novel_views": {"psnr_srgb": 30.0}}
+    for path, value in over.items():
+        node = m
+        *parents, leaf = path.split(".")
+        for key in parents:
+            node = node[key]
+        node[leaf] = value
+    return m
+
+
+def test_regression_passes_equal_and_fails_worse():
+    base = make_baseline(_metrics())
+    assert set(base["metrics"]) == {"illumination.relative_l2", "albedo.specular.dc.luminance.within_10",
+                                    "clusters.ari", "novel_views.psnr_srgb"}
+    assert all(r["status"] == "ok" for r in check(_metrics(), base))
+    rows = {r["metric"]: r for r in check(_metrics(**{"illumination.relative_l2": 0.2, "clusters.ari": 0.99}), base)}
+    assert rows["illumination.relative_l2"]["status"] == "worse"   # higher error
+    assert rows["clusters.ari"]["status"] == "ok"                   # improved
+    small = _metrics(**{"novel_views.psnr_srgb": 30.0 - 0.5 * TRACKED["novel_views.psnr_srgb"][1]})
+    assert all(r["status"] == "ok" for r in check(small, base))     # within tolerance
+    missing = _metrics()
+    missing["clusters"]["ari"] = None
+    assert {r["metric"]: r["status"] for r in check(missing, base)}["clusters.ari"] == "missing"
+    with pytest.raises(ValueError, match="metrics"):
+        check(_metrics(), {})

@@ -1,0 +1,75 @@
+"""The report, compare and regression commands on a tiny dataset."""
+import json
+import os
+import re
+
+import pytest
+
+from harness.cli import main
+
+
+@pytest.fixture(scope="module")
+def tiny_report(tiny_earth, tmp_path_factory):
+    root = tmp_path_factory.mktemp("report")
+    run, report = root / "run", root / "report"
+    assert main(["estimate", tiny_earth, "-o", str(run)]) == 0
+    assert main(["report", str(run), "-o", str(report), "--cross-check-spp", "16",
+                 "--write-baseline", str(root / "baseline.json")]) == 0
+    return root
+
+
+def test_report_contents(tiny_report):
+    report = tiny_report / "report"
+    m = json.load(open(report / "metrics.json"))
+    assert m["schema"] == "pseudolight-metrics" and m["schema_version"] == 1
+    assert m["scene"] == "earth-specular" and m["method"] == "bilinear-per-face"
+    assert m["albedo"]["diffuse"] == {"present": False}
+    spec = m["albedo"]["specular"]
+    assert spec["evaluated_faces"] > 1000 and spec["dc"]["luminance"]["within_10"] > 0.85
+    assert m["illumination"]["relative_l2"] < 0.05
+    assert m["novel_views"]["views"] == 2 and m["novel_views"]["psnr_srgb"] > 25
+    assert m["relighting"]["psnr_srgb"] > 20
+    cc = m["mitsuba_cross_check"]
+    assert cc["pass"] and cc["relative_l2"] < cc["tolerance"]
+    assert os.path.isfile(report / "mitsuba" / "scene.xml")
+
+
+def test_report_html_is_self_contained(tiny_report):
+    page = open(tiny_report / "report" / "report.html").read()
+    sources = re.findall(r'src="([^"]*)"', page)
+    assert len(sources) >= 6 and all(s.startswith("data:image/png;base64,") for s in sources)
+    assert "href=" not in page and "<script" not in page
+
+
+def test_baseline_regression_exit_codes(tiny_report, capsys):
+    base = tiny_report / "baseline.json"
+    run = tiny_report / "run"
+    assert main(["report", str(run), "-o", str(tiny_report / "again"), "--cross-check-spp", "16",
+                 "--baseline", str(base)]) == 0
+    # a metric the baseline tracks but the report lacks counts as a regression
+    assert main(["report", str(run), "-o", str(tiny_report / "skip"), "--no-mitsuba", "--baseline", str(base)]) == 1
+    assert "mitsuba_cross_check.relative_l2" in capsys.readouterr().err
+    worse = json.load(open(base))
+    worse["metrics"]["albedo.specular.dc.luminance.within_10"] = 1.5  # impossible to reach
+    worse["metrics"].pop("mitsuba_cross_check.relative_l2", None)
+    json.dump(worse, open(tiny_report / "worse.json", "w"))
+    capsys.readouterr()
+    assert main(["report", str(run), "-o", str(tiny_report / "third"), "--no-mitsuba",
+                 "--baseline", str(tiny_report / "worse.json")]) == 1
+    err = capsys.readouterr().err
+    assert "REGRESSION albedo.specular.dc.luminance.within_10" in err
+
+
+def test_compare_two_reports(tiny_report, tiny_earth):
+    other = tiny_report / "median"
+    assert main(["estimate", tiny_earth, "-o", str(other / "run"), "--method", "median-color"]) == 0
+    assert main(["report", str(other / "run"), "-o", str(other / "report"), "--no-mitsuba"]) == 0
+    out = tiny_report / "cmp"
+    assert main(["compare", str(tiny_report / "report"), str(other), "-o", str(out)]) == 0
+    table = json.load(open(out / "compare.json"))
+    methods = [r["method"] for r in table["rows"]]
+    assert methods == ["bilinear-per-face", "median-color"]
+    good, naive = table["rows"]
+    assert good["albedo.specular.dc.luminance.within_10"] > naive["albedo.specular.dc.luminance.within_10"]
+    assert "data:image/png;base64," in open(out / "compare.html").read()
+    assert main(["compare", str(tiny_report / "nothing"), "-o", str(tiny_report / "cmp2")]) == 2
