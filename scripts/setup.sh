@@ -4,11 +4,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-have_llvm() {
-    ls /usr/lib/x86_64-linux-gnu/libLLVM.so.{16,17,18,19,20,21}* \
-       /usr/lib/x86_64-linux-gnu/libLLVM-{16,17,18,19,20,21}.so \
-       /usr/lib/aarch64-linux-gnu/libLLVM.so.{16,17,18,19,20,21}* \
-       /usr/lib/llvm-{16,17,18,19,20,21}/lib/libLLVM*.so* >/dev/null 2>&1
+have_llvm() {  # true when any libLLVM >= 16 shared library is installed
+    local f
+    for f in /usr/lib/*-linux-gnu/libLLVM.so.{16,17,18,19,20,21}* \
+             /usr/lib/*-linux-gnu/libLLVM-{16,17,18,19,20,21}.so \
+             /usr/lib/llvm-{16,17,18,19,20,21}/lib/libLLVM*.so*; do
+        [ -e "$f" ] && return 0
+    done
+    return 1
 }
 if [ -z "${DRJIT_LIBLLVM_PATH:-}" ] && ! have_llvm; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
