@@ -16,7 +16,7 @@ diffuse_reflectance, specular_reflectance : texture or RGB.
 """
 from __future__ import annotations
 
-from estimator import backend
+from .plugins import register_plugin
 
 PLUGIN_NAME = "pseudolight_diffuse_mirror"
 
@@ -73,17 +73,6 @@ def _make_class(mi, dr):
     return DiffuseMirrorBSDF
 
 
-_registered = False
-
-
 def register() -> None:
     """Register the plugin with Mitsuba (idempotent)."""
-    global _registered
-    if _registered:
-        return
-    mi = backend.set_variant()
-    import drjit as dr
-
-    cls = _make_class(mi, dr)
-    mi.register_bsdf(PLUGIN_NAME, lambda props: cls(props))
-    _registered = True
+    register_plugin("bsdf", PLUGIN_NAME, _make_class)

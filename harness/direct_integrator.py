@@ -14,7 +14,7 @@ hide_emitters : unused, accepted for compatibility.
 """
 from __future__ import annotations
 
-from estimator import backend
+from .plugins import register_plugin
 
 PLUGIN_NAME = "pseudolight_direct"
 
@@ -49,17 +49,6 @@ def _make_class(mi, dr):
     return DirectDeltaIntegrator
 
 
-_registered = False
-
-
 def register() -> None:
     """Register the integrator with Mitsuba (idempotent)."""
-    global _registered
-    if _registered:
-        return
-    mi = backend.set_variant()
-    import drjit as dr
-
-    cls = _make_class(mi, dr)
-    mi.register_integrator(PLUGIN_NAME, lambda props: cls(props))
-    _registered = True
+    register_plugin("integrator", PLUGIN_NAME, _make_class)

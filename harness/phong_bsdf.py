@@ -23,7 +23,7 @@ exponent : float > 0, default 10.
 """
 from __future__ import annotations
 
-from estimator import backend
+from .plugins import register_plugin
 
 PLUGIN_NAME = "pseudolight_phong"
 
@@ -117,17 +117,6 @@ def _make_class(mi, dr):
     return PhongBSDF
 
 
-_registered = False
-
-
 def register() -> None:
-    """Register the plugin with Mitsuba (idempotent; selects the variant if needed)."""
-    global _registered
-    if _registered:
-        return
-    mi = backend.set_variant()
-    import drjit as dr
-
-    cls = _make_class(mi, dr)
-    mi.register_bsdf(PLUGIN_NAME, lambda props: cls(props))
-    _registered = True
+    """Register the plugin with Mitsuba (idempotent)."""
+    register_plugin("bsdf", PLUGIN_NAME, _make_class)
