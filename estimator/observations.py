@@ -86,8 +86,12 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         to_cam = view.camera.center[None] - centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         parts.append((faces, np.full(len(faces), index), sums[faces] / counts[faces, None], counts[faces], to_cam))
-    face, view_i, rgb, pixels, view_dir = (np.concatenate(p) for p in zip(*parts))
-    if len(face) == 0:
+    blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
+    if len(blind) == len(views):
         raise ValueError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
+    if blind:
+        raise ValueError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
+                         f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
+    face, view_i, rgb, pixels, view_dir = (np.concatenate(p) for p in zip(*parts))
     return Observations(face.astype(np.int64), view_i.astype(np.int64), rgb, pixels.astype(np.int64),
                         view_dir, f, len(views))

@@ -14,7 +14,7 @@ from estimator.backend import VARIANTS, BackendError
 
 from .atomic import OutputExistsError
 from .dataset import DatasetError
-from .runs import RunError
+from .runs import RunError, estimator_settings
 from .scene_spec import SCENES_DIR, SpecError, load_spec, resolve_scene, shipped_scenes
 
 DEFAULT_SCENE = "earth-specular"
@@ -145,7 +145,7 @@ def cmd_demo(args) -> int:
         summary = generate(spec, data_dir, overwrite=args.overwrite, variant=args.variant)
         print(f"generated {DEFAULT_SCENE}: {summary['views']} views in {summary['seconds']['total']:.1f} s")
     ds = read_dataset(data_dir, load_test=False)
-    method, config = resolve_estimator(argparse.Namespace(method=None, variant=args.variant), ds.meta)
+    method, config = estimator_settings(ds.meta, None, {"variant": args.variant} if args.variant else {})
     est = estimate(ds.data, method, config)
     write_run(run_dir, est, data_dir, overwrite=True, extra={"scene": ds.meta.get("scene")})
     print(f"estimated with {method} ({config.components}) in {est.info['timings']['total']:.1f} s")
@@ -157,26 +157,12 @@ def cmd_demo(args) -> int:
     return _report_exit(metrics, regressions, report_dir)
 
 
-CONFIG_FLAGS = {  # CLI flag -> EstimatorConfig field
-    "components": "components", "sh_order": "sh_order", "directions": "directions",
-    "iterations": "iterations", "min_cos_view": "min_cos_view", "diffuse_light": "diffuse_light",
-    "defilter_order": "defilter_order", "phong_exponent": "phong_exponent",
-    "specular_model": "specular_model", "variant": "variant",
-}
+CONFIG_FLAGS = ("components", "sh_order", "directions", "iterations", "min_cos_view", "diffuse_light",
+                "defilter_order", "phong_exponent", "specular_model", "variant")  # flags named as EstimatorConfig fields
 
 
-def resolve_estimator(args, meta: dict) -> tuple[str, "EstimatorConfig"]:
-    """Method and config: EstimatorConfig defaults <- the dataset's estimator_defaults <- flags."""
-    from estimator.config import EstimatorConfig
-
-    chosen = dict(meta.get("estimator_defaults") or {})
-    method = args.method or chosen.pop("method", None) or "bilinear-clustered"
-    chosen.pop("method", None)
-    for flag, key in CONFIG_FLAGS.items():
-        value = getattr(args, flag, None)
-        if value is not None:
-            chosen[key] = value
-    return method, EstimatorConfig(**chosen)
+def _config_flags(args) -> dict:
+    return {k: getattr(args, k) for k in CONFIG_FLAGS if getattr(args, k, None) is not None}
 
 
 def cmd_estimate(args) -> int:
@@ -187,7 +173,7 @@ def cmd_estimate(args) -> int:
     from .runs import write_run
 
     ds = read_dataset(args.dataset, load_test=False)
-    method, config = resolve_estimator(args, ds.meta)
+    method, config = estimator_settings(ds.meta, args.method, _config_flags(args))
     known = None
     if get_method(method).needs_illumination:
         if ds.ground_truth is None:

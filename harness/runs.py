@@ -23,6 +23,16 @@ class RunError(ValueError):
     """A run folder that is missing or malformed."""
 
 
+def estimator_settings(meta: dict, method: str | None = None, overrides: dict | None = None
+                       ) -> tuple[str, EstimatorConfig]:
+    """Method and config for a dataset: EstimatorConfig defaults <- the dataset's
+    ``estimator_defaults`` (its scene's [estimator] table) <- ``method``/``overrides``."""
+    chosen = dict(meta.get("estimator_defaults") or {})
+    default_method = chosen.pop("method", None) or "bilinear-clustered"
+    chosen.update(overrides or {})
+    return method or default_method, EstimatorConfig(**chosen)
+
+
 def versions() -> dict:
     """Versions of pseudolight and the libraries that shape its numbers."""
     out = {"python": platform.python_version()}

@@ -11,7 +11,7 @@ from estimator.methods import REGISTRY, estimate
 from .dataset import read_dataset
 from .generate import generate
 from .reporting import build_report, compare_runs
-from .runs import write_run
+from .runs import estimator_settings, write_run
 from .scene_spec import SCENES_DIR, SpecError, load_spec, resolve_scene
 
 
@@ -44,9 +44,6 @@ def run_suite(suite: dict, out_dir: str, profile: str | None = None, mitsuba: bo
 
     Layout: OUT/SCENE/dataset, OUT/SCENE/METHOD/{run,report}, OUT/compare.
     """
-    from .cli import resolve_estimator  # the dataset's [estimator] defaults, as the CLI applies them
-    import argparse
-
     profile = profile or suite.get("profile")
     reports = []
     for scene in suite["scenes"]:
@@ -58,7 +55,7 @@ def run_suite(suite: dict, out_dir: str, profile: str | None = None, mitsuba: bo
         ds = read_dataset(data_dir, load_test=False)
         known = sh.pseudo_illumination(ds.ground_truth.sh, ds.ground_truth.brdf["exponent"])
         for method in suite["methods"]:
-            _, config = resolve_estimator(argparse.Namespace(method=method), ds.meta)
+            _, config = estimator_settings(ds.meta, method)
             t = time.perf_counter()
             est = estimate(ds.data, method, config, known_sh=known)
             run_dir = os.path.join(out_dir, scene, method, "run")

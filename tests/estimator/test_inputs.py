@@ -40,6 +40,10 @@ def test_cameras_that_see_nothing_are_refused():
     data = MultiViewData(icosphere(1), [View("away", away, np.zeros((12, 16, 3)))])
     with pytest.raises(ValueError, match="no camera sees any face"):
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+    good = View("good", CAM, np.zeros((12, 16, 3)))
+    data = MultiViewData(icosphere(1), [good, View("away", away, np.zeros((12, 16, 3)))])
+    with pytest.raises(ValueError, match="1 camera.s. see none of the mesh: away"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 
 def test_observations_are_per_face_means_of_pure_pixels():
