@@ -286,7 +286,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--write-baseline", metavar="FILE", help="store this report's tracked metrics as a baseline")
     rp.add_argument("--rotate-illumination", nargs=2, metavar=("AXIS", "DEG"), default=["y", "90"],
                     help="relighting test: turn the light about x, y or z (default: y 90)")
-    rp.add_argument("--cross-check-spp", type=int, default=64, help="spp of the Mitsuba re-render")
+    rp.add_argument("--cross-check-spp", type=int,
+                    help="spp of the Mitsuba re-render (default 64; 512 for --specular-model lobe)")
     rp.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba re-render cross-check")
     rp.add_argument("--overwrite", action="store_true")
     rp.set_defaults(func=cmd_report)

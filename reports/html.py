@@ -21,6 +21,7 @@ SUMMARY_ROWS = [  # (label, dotted path, format)
     ("novel views: PSNR sRGB (dB)", "novel_views.psnr_srgb", "{:.2f}"),
     ("novel views: SSIM sRGB", "novel_views.ssim_srgb", "{:.4f}"),
     ("novel views: PSNR linear (dB)", "novel_views.psnr_linear", "{:.2f}"),
+    ("novel views: object pixels not estimated", "novel_views.unestimated_pixel_share", "{:.3f}"),
     ("relighting: PSNR sRGB (dB)", "relighting.psnr_srgb", "{:.2f}"),
     ("relighting: SSIM sRGB", "relighting.ssim_srgb", "{:.4f}"),
     ("Mitsuba re-render vs forward model: relative L2", "mitsuba_cross_check.relative_l2", "{:.4f}"),
