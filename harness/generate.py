@@ -17,28 +17,35 @@ from .dataset import write_dataset, write_ground_truth
 from .illumination import Illumination, build_illumination
 from .images import read_linear_rgb
 from .render import build_scene, make_cameras, render_views
-from .scene_spec import AlbedoSpec, SceneSpec
-from .textures import region_labels, spherical_texture_average
+from .scene_spec import AlbedoSpec, SceneSpec, SpecError
+from .textures import region_labels, spherical_texture_average, uv_texture_average
 
 GROUND_TRUTH_SH_ORDER = 12
 
 
-def build_mesh(spec: SceneSpec) -> TriangleMesh:
+def build_mesh(spec: SceneSpec) -> tuple[TriangleMesh, np.ndarray | None]:
+    """The spec's mesh and its per-vertex texture coordinates (None unless a mesh file has them)."""
     g = spec.geometry
     if g.type == "icosphere":
-        return geometry.icosphere(g.subdivisions, g.radius)
+        return geometry.icosphere(g.subdivisions, g.radius), None
     if g.type == "blob":
-        return geometry.blob(g.subdivisions, g.radius, g.lobes, g.depth)
-    return geometry.load_mesh_file(g.file)
+        return geometry.blob(g.subdivisions, g.radius, g.lobes, g.depth), None
+    return geometry.load_mesh_with_uv(g.file)
 
 
-def _albedo(mesh: TriangleMesh, albedo: AlbedoSpec) -> np.ndarray:
+def _albedo(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where: str) -> np.ndarray:
     if albedo.value is not None:
         return np.tile(np.asarray(albedo.value, float) * albedo.scale, (mesh.num_faces, 1))
-    return albedo.scale * spherical_texture_average(mesh, read_linear_rgb(albedo.texture))
+    texture = read_linear_rgb(albedo.texture)
+    if albedo.mapping == "uv":
+        if uv is None:
+            raise SpecError(f"{where}.mapping = 'uv' but the mesh file has no per-vertex texture coordinates")
+        return albedo.scale * uv_texture_average(mesh, uv, texture)
+    return albedo.scale * spherical_texture_average(mesh, texture)
 
 
-def build_materials(mesh: TriangleMesh, spec: SceneSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def build_materials(mesh: TriangleMesh, spec: SceneSpec, uv: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Per-face (diffuse (F, 3), specular (F, 3), regions (F,) or None)."""
     m = spec.material
     if m.regions:
@@ -46,7 +53,8 @@ def build_materials(mesh: TriangleMesh, spec: SceneSpec) -> tuple[np.ndarray, np
         diffuse = np.array([r.diffuse for r in m.regions], float)[labels]
         specular = np.array([r.specular for r in m.regions], float)[labels]
         return diffuse, specular, labels
-    return _albedo(mesh, m.diffuse), _albedo(mesh, m.specular), None
+    return (_albedo(mesh, uv, m.diffuse, "material.diffuse"),
+            _albedo(mesh, uv, m.specular, "material.specular"), None)
 
 
 @dataclasses.dataclass
@@ -78,8 +86,8 @@ class GeneratedScene:
 
 def prepare(spec: SceneSpec) -> GeneratedScene:
     """Geometry, materials and illumination of a spec (no rendering)."""
-    mesh = build_mesh(spec)
-    diffuse, specular, regions = build_materials(mesh, spec)
+    mesh, uv = build_mesh(spec)
+    diffuse, specular, regions = build_materials(mesh, spec, uv)
     return GeneratedScene(spec, mesh, diffuse, specular, regions, build_illumination(spec.illumination, spec.seed))
 
 

@@ -37,6 +37,11 @@ def blob(subdivisions: int, radius: float = 1.0, lobes: int = 4, depth: float = 
 
 def load_mesh_file(path: str | os.PathLike) -> TriangleMesh:
     """Load a triangle mesh file without merging, dropping or reordering faces."""
+    return load_mesh_with_uv(path)[0]
+
+
+def load_mesh_with_uv(path: str | os.PathLike) -> tuple[TriangleMesh, np.ndarray | None]:
+    """(mesh, per-vertex texture coordinates (V, 2) or None) of a mesh file, face order kept."""
     path = str(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"mesh file not found: {path}")
@@ -47,7 +52,9 @@ def load_mesh_file(path: str | os.PathLike) -> TriangleMesh:
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if faces.size == 0:
         raise ValueError(f"mesh file {path} has no faces")
-    return TriangleMesh(np.asarray(loaded.vertices), faces)
+    uv = getattr(getattr(loaded, "visual", None), "uv", None)
+    uv = None if uv is None or len(uv) != len(loaded.vertices) else np.asarray(uv, dtype=np.float64)
+    return TriangleMesh(np.asarray(loaded.vertices), faces), uv
 
 
 def save_mesh_ply(mesh: TriangleMesh, path: str | os.PathLike) -> None:

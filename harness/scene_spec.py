@@ -92,8 +92,10 @@ class AlbedoSpec:
     value: list[float] | None = None
     texture: str | None = None
     scale: float = 1.0
+    mapping: str = "spherical"
 
     def validate(self, where: str, base_dir: str) -> None:
+        _choice(f"{where}.mapping", self.mapping, ("spherical", "uv"))
         if (self.value is None) == (self.texture is None):
             raise SpecError(f"{where} needs exactly one of 'value' (RGB) or 'texture' (image file)")
         if self.value is not None:
@@ -146,6 +148,10 @@ class MaterialSpec:
             self.specular = self.specular or AlbedoSpec(value=[0.0, 0.0, 0.0])
             self.diffuse.validate("material.diffuse", base_dir)
             self.specular.validate("material.specular", base_dir)
+
+    def uses_uv(self) -> bool:
+        return any(a is not None and a.texture is not None and a.mapping == "uv"
+                   for a in (self.diffuse, self.specular))
 
 
 @dataclass
@@ -339,6 +345,8 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
     )
     spec.geometry.validate(base_dir)
     spec.material.validate(base_dir)
+    if spec.material.uses_uv() and spec.geometry.type != "mesh":
+        raise SpecError("material texture mapping = 'uv' needs geometry.type = 'mesh' with texture coordinates")
     spec.illumination.validate(base_dir)
     spec.cameras.validate()
     spec.render.validate(spec.illumination)

@@ -39,6 +39,35 @@ def spherical_texture_average(mesh: TriangleMesh, texture: np.ndarray, samples_p
     return values.reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
 
 
+def uv_texture_average(mesh: TriangleMesh, uv: np.ndarray, texture: np.ndarray,
+                       samples_per_edge: int = 4) -> np.ndarray:
+    """Area average over each face of an image texture through per-vertex UVs.
+
+    u runs left to right, v bottom to top (OBJ/PLY convention), wrapping
+    (repeat); bilinear lookup between pixel centres.
+
+    Parameters
+    ----------
+    uv : (V, 2) texture coordinates; texture : (H, W, C).
+
+    Returns
+    -------
+    (F, C) float64.
+    """
+    bary = _barycentric_grid(samples_per_edge)
+    coords = np.einsum("sk,fkd->fsd", bary, uv[mesh.faces]).reshape(-1, 2)
+    h, w = texture.shape[:2]
+    x = np.mod(coords[:, 0], 1.0) * w - 0.5
+    y = (1.0 - np.mod(coords[:, 1], 1.0)) * h - 0.5
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, x1 = x0 % w, (x0 + 1) % w
+    y0, y1 = np.clip(y0, 0, h - 1), np.clip(y0 + 1, 0, h - 1)
+    t = np.asarray(texture, dtype=np.float64)
+    values = ((1 - fy) * ((1 - fx) * t[y0, x0] + fx * t[y0, x1]) + fy * ((1 - fx) * t[y1, x0] + fx * t[y1, x1]))
+    return values.reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
+
+
 def region_labels(mesh: TriangleMesh, rules: list[tuple[np.ndarray, list[tuple[float, float]]]]) -> np.ndarray:
     """Region of each face from direction bands; later rules override earlier ones.
 

@@ -68,3 +68,31 @@ def test_relative_assets_resolve_against_the_spec_folder():
     spec = load_spec(resolve_scene("earth-specular"))
     assert os.path.isfile(spec.material.specular.texture)
     assert spec.illumination.file.endswith(os.path.join("scenes", "assets", "grace.hdr"))
+
+
+def test_uv_textures_from_a_mesh_file(tmp_path):
+    import numpy as np
+    import trimesh
+
+    from harness.generate import prepare
+
+    # a quad whose UVs cover the left half of a texture that is red on the left, blue on the right
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    uv = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 1.0], [0.0, 1.0]]) * [0.98, 1] + [0.01, 0]
+    mesh = trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], visual=trimesh.visual.TextureVisuals(uv=uv), process=False)
+    mesh.export(tmp_path / "quad.obj")
+    from harness.exr import write_exr
+    tex = np.zeros((4, 8, 3))
+    tex[:, :4] = [1.0, 0.0, 0.0]
+    tex[:, 4:] = [0.0, 0.0, 1.0]
+    write_exr(tmp_path / "tex.exr", tex)
+    raw = {"name": "uv", "geometry": {"type": "mesh", "file": "quad.obj"},
+           "material": {"diffuse": {"texture": "tex.exr", "mapping": "uv"}},
+           "illumination": {"type": "directional", "lights": [{"to_light": [0, 0, 1]}]}}
+    scene = prepare(parse_spec(raw, str(tmp_path)))
+    assert scene.mesh.num_faces == 2
+    np.testing.assert_allclose(scene.diffuse[:, 0], 1.0, atol=0.05)   # all red: the UVs stay left
+    np.testing.assert_allclose(scene.diffuse[:, 2], 0.0, atol=0.05)
+    raw["geometry"] = {"type": "icosphere"}
+    with pytest.raises(SpecError, match="mapping = 'uv'"):
+        parse_spec(raw, str(tmp_path))
