@@ -135,8 +135,9 @@ def find_metrics(folder: str) -> str:
 COMPARE_COLUMNS = [
     ("scene", "scene"), ("method", "method"), ("components", "components"),
     ("SH rel. L2", "illumination.relative_l2"),
-    ("spec ±10 %", "albedo.specular.dc.luminance.within_10"),
+    ("spec ±10 % (DC)", "albedo.specular.dc.luminance.within_10"),
     ("spec median", "albedo.specular.dc.luminance.median_ratio"),
+    ("spec ±10 % (lstsq)", "albedo.specular.lstsq.luminance.within_10"),
     ("diff ±10 % (DC)", "albedo.diffuse.dc.luminance.within_10"),
     ("diff ±10 % (lstsq)", "albedo.diffuse.lstsq.luminance.within_10"),
     ("diff median |err| (lstsq)", "diffuse_median_abs_error"),
