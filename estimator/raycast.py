@@ -87,8 +87,9 @@ class RayCaster:
         """(H, W) int64 face seen through each pixel centre, -1 for background."""
         return self.face_id_buffers([camera], pure=False)[0]
 
-    def face_id_buffers(self, cameras: list[Camera], pure: bool = False) -> list[np.ndarray]:
-        """Face-ID buffers of many cameras, traced in one batched call.
+    def face_id_buffers(self, cameras: list[Camera], pure: bool = False,
+                        max_rays: int = 4_000_000) -> list[np.ndarray]:
+        """Face-ID buffers of many cameras, traced in batches of up to ``max_rays`` rays.
 
         With ``pure=True`` a pixel keeps its face only when the rays through its
         four corners hit that same face (-1 otherwise): such pixels are covered by
@@ -104,10 +105,18 @@ class RayCaster:
             if pure:  # an (H+1) x (W+1) grid of rays through the pixel corners
                 grids.append(Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5,
                                     cam.width + 1, cam.height + 1))
-        rays = [g.pixel_rays() for g in grids]
-        ids = self.first_hit_faces(np.concatenate([o for o, _ in rays]), np.concatenate([d for _, d in rays]))
-        buffers = np.split(ids, np.cumsum([g.width * g.height for g in grids])[:-1])
-        buffers = [b.reshape(g.height, g.width) for b, g in zip(buffers, grids)]
+        buffers: list[np.ndarray] = []
+        batch: list[Camera] = []
+        for grid in grids + [None]:
+            size = sum(g.width * g.height for g in batch)
+            if grid is None or (batch and size + grid.width * grid.height > max_rays):
+                rays = [g.pixel_rays() for g in batch]
+                ids = self.first_hit_faces(np.concatenate([o for o, _ in rays]), np.concatenate([d for _, d in rays]))
+                parts = np.split(ids, np.cumsum([g.width * g.height for g in batch])[:-1])
+                buffers += [b.reshape(g.height, g.width) for b, g in zip(parts, batch)]
+                batch = []
+            if grid is not None:
+                batch.append(grid)
         if not pure:
             return buffers
         out = []
