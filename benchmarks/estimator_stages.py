@@ -17,7 +17,7 @@ sys.path.insert(0, ROOT)
 from estimator import backend  # noqa: E402
 
 
-def bare_ray_test(caster, sampling, repeats: int = 3) -> tuple[int, float]:
+def bare_ray_test(caster, sampling, repeats: int = 5) -> tuple[int, float]:
     """(rays, best seconds) of scene.ray_test alone on the visibility stage's rays (built beforehand)."""
     mi = caster.mi
     mesh = caster.mesh
@@ -60,9 +60,11 @@ def main() -> None:
     caster = RayCaster(ds.data.mesh)
     sampling = sphere_sampling(1164)
     compute_visibility(caster, sampling)  # warm-up: kernel compilation
-    t = time.perf_counter()
-    compute_visibility(caster, sampling)
-    stage = time.perf_counter() - t
+    stage = np.inf
+    for _ in range(5):  # best of 5, as for the bare figure
+        t = time.perf_counter()
+        compute_visibility(caster, sampling)
+        stage = min(stage, time.perf_counter() - t)
     rays, bare = bare_ray_test(caster, sampling)
     est = estimate(ds.data, "bilinear-per-face", EstimatorConfig(components="specular"))
     out = {
