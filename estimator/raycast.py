@@ -1,4 +1,5 @@
-"""Mitsuba ray queries on a TriangleMesh: face-ID buffers and shadow tests.
+"""Mitsuba ray queries on a TriangleMesh: first hits and face-ID buffers (the shadow
+function traces its rays in one Dr.Jit kernel, see :mod:`estimator.visibility`).
 
 All queries are batched Dr.Jit calls over many rays; nothing loops over rays in Python.
 """
@@ -29,7 +30,7 @@ def mitsuba_mesh(mesh: TriangleMesh, name: str = "mesh", props=None):
 
 
 class RayCaster:
-    """A Mitsuba scene holding one mesh, for batched intersection and shadow queries.
+    """A Mitsuba scene holding one mesh (robust intersections), for batched ray queries.
 
     Parameters
     ----------
@@ -125,9 +126,3 @@ class RayCaster:
                     & (corners[:-1, 1:] == centre) & (corners[1:, 1:] == centre))
             out.append(np.where(same, centre, -1))
         return out
-
-    def occluded(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """(N,) bool: True when the ray (N, 3) x (N, 3) hits any geometry."""
-        if len(origins) == 0:
-            return np.zeros(0, dtype=bool)
-        return np.asarray(self.scene.ray_test(self._rays(origins, directions)), dtype=bool)

@@ -51,7 +51,6 @@ class Evaluation:
     metrics: dict
     ratios: dict = field(default_factory=dict)          # 'specular'/'diffuse' -> (n, 4) DC-gauge ratios
     filtered_truth_sh: np.ndarray | None = None
-    masks: dict = field(default_factory=dict)
 
 
 def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: ImageSet | None = None,
@@ -70,7 +69,7 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
     out: dict = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION}
     out["illumination"] = metrics.sh_comparison(est.sh, truth_sh)
     out["faces"] = {"total": int(mesh.num_faces), "estimated": int(est.observed.sum())}
-    ratios, masks, albedo = {}, {}, {}
+    ratios, albedo = {}, {}
     for component in ("specular", "diffuse"):
         true_albedo = getattr(truth, component)
         est_albedo = getattr(est, component)
@@ -78,7 +77,6 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
             albedo[component] = {"present": False}
             continue
         mask = evaluation_mask(mesh, truth, est.observed, component)
-        masks[component] = mask
         entry = {"present": True, "evaluated_faces": int(mask.sum())}
         for scale in metrics.SCALES:
             r = metrics.albedo_ratios(est_albedo, true_albedo, mask, scale, dc)
@@ -110,4 +108,4 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
         out["mitsuba_cross_check"] = cc
     else:
         out["mitsuba_cross_check"] = None if cross_check is None else {"note": cross_check.note}
-    return Evaluation(out, ratios, truth_sh, masks)
+    return Evaluation(out, ratios, truth_sh)
