@@ -24,7 +24,9 @@ class Illumination:
     positions : (K, 3) point light positions.
     intensity : (K, 3) point light radiant intensity (W/sr).
     envmap : (H, W, 3) radiance map in Mitsuba's envmap orientation (scaled).
-    rotation : (3, 3) rotation applied to the envmap (its Mitsuba ``to_world``).
+    sunsky : parameters of Mitsuba's Hosek-Wilkie ``sunsky`` (to_sun, turbidity,
+        ground_albedo, sun_scale, sky_scale, scale), sun direction in world space (+Y up).
+    rotation : (3, 3) rotation applied to the envmap or sun-sky (its Mitsuba ``to_world``).
     """
 
     kind: str
@@ -33,11 +35,12 @@ class Illumination:
     positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     intensity: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     envmap: np.ndarray | None = None
+    sunsky: dict | None = None
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
 
     @property
     def is_delta(self) -> bool:
-        return self.kind != "envmap"
+        return self.kind in ("directional", "point")
 
     def rotated(self, rotation: np.ndarray) -> "Illumination":
         """The same light turned by ``rotation`` (3, 3) about the world origin."""
@@ -56,6 +59,8 @@ class Illumination:
             offset = self.positions - center
             dist2 = np.sum(offset ** 2, axis=1, keepdims=True)
             return sh.project_directional(order, offset / np.sqrt(dist2), self.intensity / dist2)
+        if self.kind == "sunsky":
+            return sunsky_sh(self, order)
         coeffs = sh.project_latlong(order, self.envmap)
         return sh.rotation_matrix(order, self.rotation) @ coeffs
 
@@ -73,6 +78,8 @@ class Illumination:
             to_world[:3, :3] = self.rotation
             out["envmap"] = {"type": "envmap", "bitmap": mi.Bitmap(self.envmap.astype(np.float32)),
                              "to_world": mi.ScalarTransform4f(to_world)}
+        if self.sunsky is not None:
+            out["sunsky"] = sunsky_emitter(mi, self)
         return out
 
     def to_json(self) -> dict:
@@ -84,6 +91,9 @@ class Illumination:
         elif self.kind == "point":
             out["lights"] = [{"position": p.tolist(), "intensity": i.tolist()}
                              for p, i in zip(self.positions, self.intensity)]
+        elif self.kind == "sunsky":
+            out["sunsky"] = self.sunsky
+            out["rotation"] = self.rotation.tolist()
         else:
             out["envmap_file"] = "envmap.exr"
             out["rotation"] = self.rotation.tolist()
@@ -100,6 +110,8 @@ class Illumination:
             lights = data["lights"]
             return cls(kind, positions=np.array([l["position"] for l in lights], float).reshape(-1, 3),
                        intensity=np.array([l["intensity"] for l in lights], float).reshape(-1, 3))
+        if kind == "sunsky":
+            return cls(kind, sunsky=data["sunsky"], rotation=np.array(data.get("rotation", np.eye(3)), float))
         if envmap is None:
             raise ValueError("an envmap illumination needs its lat-long image")
         return cls(kind, envmap=envmap, rotation=np.array(data.get("rotation", np.eye(3)), float))
@@ -115,9 +127,59 @@ def build_illumination(spec: IlluminationSpec, seed: int = 0) -> Illumination:
     if spec.type == "point":
         return Illumination("point", positions=np.array([l.position for l in spec.lights], float),
                             intensity=s * np.array([l.intensity for l in spec.lights], float))
+    if spec.type == "sunsky":
+        to_sun = np.asarray(spec.to_sun, float)
+        return Illumination("sunsky", sunsky={
+            "to_sun": (to_sun / np.linalg.norm(to_sun)).tolist(), "turbidity": spec.turbidity,
+            "ground_albedo": spec.ground_albedo, "sun_scale": spec.sun_scale, "sky_scale": spec.sky_scale,
+            "scale": s})
     probe = s * read_linear_rgb(spec.file).astype(np.float64)
     if spec.type == "probe-clustered":
         d, e = cluster_probe(probe, spec.count, white=spec.white, seed=seed)
         return Illumination("directional", to_light=d, irradiance=e)
     latlong.directions(*probe.shape[:2])  # validates the map size
     return Illumination("envmap", envmap=probe)
+
+
+# Mitsuba's sunsky frame is Z-up; this turns its local +Z to world +Y.
+_SUNSKY_FRAME = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+SUN_APERTURE_DEG = 0.5358  # Mitsuba's default, passed explicitly
+
+
+def sunsky_emitter(mi, light: Illumination, sun: bool = True, sky: bool = True) -> dict:
+    """The ``sunsky`` emitter dict of a light (optionally sun or sky only), Y-up, rotated."""
+    p = light.sunsky
+    to_world = np.eye(4)
+    to_world[:3, :3] = light.rotation @ _SUNSKY_FRAME
+    return {"type": "sunsky", "sun_direction": (light.rotation @ np.asarray(p["to_sun"])).tolist(),
+            "turbidity": float(p["turbidity"]), "albedo": float(p["ground_albedo"]),
+            "sun_scale": float(p["sun_scale"] * p["scale"]) if sun else 0.0,
+            "sky_scale": float(p["sky_scale"] * p["scale"]) if sky else 0.0,
+            "sun_aperture": SUN_APERTURE_DEG, "complex_sun": False,
+            "to_world": mi.ScalarTransform4f(to_world)}
+
+
+def _emitter_radiance(mi, emitter, dirs: np.ndarray) -> np.ndarray:
+    """(N, 3) radiance an environment emitter sends towards the origin from directions (N, 3)."""
+    import drjit as dr
+
+    si = dr.zeros(mi.SurfaceInteraction3f, len(dirs))
+    si.wi = mi.Vector3f(*(-np.asarray(dirs, np.float32)).T)
+    return np.array(emitter.eval(si), dtype=np.float64).T
+
+
+def sunsky_sh(light: Illumination, order: int, sky_size=(256, 512)) -> np.ndarray:
+    """SH of a sun-sky light: the sky by quadrature on a lat-long grid (sun off); the sun
+    (a uniform disc: ``complex_sun`` off) as a delta light of irradiance
+    L_sun x 2 pi (1 - cos(aperture / 2))."""
+    from estimator import backend
+
+    mi = backend.set_variant()
+    sky = mi.load_dict(sunsky_emitter(mi, light, sun=False))
+    h, w = sky_size
+    radiance = _emitter_radiance(mi, sky, latlong.directions(h, w).reshape(-1, 3)).reshape(h, w, 3)
+    to_sun = light.rotation @ np.asarray(light.sunsky["to_sun"], float)
+    sun = mi.load_dict(sunsky_emitter(mi, light, sky=False))
+    disc = 2 * np.pi * (1 - np.cos(np.radians(0.5 * SUN_APERTURE_DEG)))
+    irradiance = _emitter_radiance(mi, sun, to_sun[None])[0] * disc
+    return sh.project_latlong(order, radiance) + sh.project_directional(order, to_sun[None], irradiance[None])

@@ -170,9 +170,14 @@ class IlluminationSpec:
     count: int = 40
     white: bool = True
     scale: float = 1.0
+    to_sun: list[float] = field(default_factory=lambda: [0.5, 0.6, 0.3])
+    turbidity: float = 3.0
+    ground_albedo: float = 0.3
+    sun_scale: float = 1.0
+    sky_scale: float = 1.0
 
     def validate(self, base_dir: str) -> None:
-        kinds = ("directional", "point", "probe-clustered", "envmap")
+        kinds = ("directional", "point", "probe-clustered", "envmap", "sunsky")
         _choice("illumination.type", self.type, kinds)
         _num("illumination.scale", self.scale, 0, lo_open=True)
         if self.type in ("directional", "point"):
@@ -199,6 +204,13 @@ class IlluminationSpec:
         _num("illumination.count", self.count, 1, 1000, integer=True)
         if not isinstance(self.white, bool):
             raise SpecError(f"illumination.white must be true or false, got {self.white!r}")
+        self.to_sun = _vec("illumination.to_sun", self.to_sun, nonzero=True)
+        if self.type == "sunsky" and self.to_sun[1] <= 0:
+            raise SpecError(f"illumination.to_sun must point above the horizon (+Y up), got {self.to_sun}")
+        _num("illumination.turbidity", self.turbidity, 1, 10)
+        _num("illumination.ground_albedo", self.ground_albedo, 0, 1)
+        _num("illumination.sun_scale", self.sun_scale, 0)
+        _num("illumination.sky_scale", self.sky_scale, 0)
 
     @property
     def is_delta(self) -> bool:

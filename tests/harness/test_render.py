@@ -101,3 +101,30 @@ def test_exported_estimate_loads_in_mitsuba(tmp_path):
     assert image.shape == (24, 24, 4)
     # a convex object under constant radiance 1: every pixel it covers shows t_d + t_s
     np.testing.assert_allclose(image[12, 12, :3], 0.5, rtol=0.03)
+
+
+def test_sunsky_ground_truth_matches_mitsuba_on_a_white_plane():
+    # a white Lambertian plane facing +Y: its radiance is (sky irradiance + sun irradiance cos) / pi
+    from estimator import sh
+    from harness.illumination import sunsky_sh
+
+    to_sun = np.array([0.5, 0.6, 0.3]) / np.linalg.norm([0.5, 0.6, 0.3])
+    light = Illumination("sunsky", sunsky={"to_sun": to_sun.tolist(), "turbidity": 3.0, "ground_albedo": 0.3,
+                                           "sun_scale": 1.0, "sky_scale": 1.0, "scale": 1.0})
+    v = np.array([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]], float)
+    plane = TriangleMesh(v, np.array([[0, 1, 2], [0, 2, 3]]))
+    assert np.allclose(plane.face_normals, [0, 1, 0])
+    cam = Camera.from_fov(look_at([0.0, 3.0, 0.5], [0, 0, 0]), 20.0, 9, 9)
+    scene = build_scene(plane, np.ones((2, 3)), np.zeros((2, 3)), 10.0, light, cam, 1024, "path", max_depth=2)
+    pixel = render_views(scene, [cam], spp=1024)[0][3:6, 3:6, :3].mean(axis=(0, 1))
+    # the same number from the ground-truth SH (order 12, clamped-cosine filter)
+    coeffs = sunsky_sh(light, 12)
+    l = np.arange(13)
+    a = np.zeros(13)
+    a[0], a[1] = np.pi, 2 * np.pi / 3
+    even = l[2::2]
+    from scipy.special import factorial
+    a[2::2] = 2 * np.pi * (-1) ** (even // 2 - 1) / ((even + 2) * (even - 1)) * factorial(even) / (
+        2.0 ** even * factorial(even // 2) ** 2)
+    expected = (sh.expand_per_degree(a)[:, None] * coeffs).T @ sh.basis(12, np.array([[0.0, 1.0, 0.0]]))[0] / np.pi
+    np.testing.assert_allclose(pixel, expected, rtol=0.03)
