@@ -3,6 +3,9 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import numpy as np
+
+from .sh import phong_filter
 from .solver import COMPONENTS
 
 DIFFUSE_LIGHTS = ("pseudo", "defiltered")
@@ -82,6 +85,11 @@ class EstimatorConfig:
         for ok, message in checks:
             if not ok:
                 raise ValueError(f"estimator config: {message}")
+        if self.diffuse_light == "defiltered" and self.specular_model == "mirror":
+            f = phong_filter(self.defilter_order, self.phong_exponent)
+            if np.any(np.abs(f) < 1e-6):
+                raise ValueError(f"estimator config: the Phong filter of exponent {self.phong_exponent} vanishes "
+                                 f"below degree {self.defilter_order}; lower defilter_order")
 
     def to_dict(self) -> dict:
         return asdict(self)

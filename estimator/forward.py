@@ -37,9 +37,9 @@ class Predictor:
         self.c_matrix = diffuse_matrix(mesh, self.sampling, self.visibility, estimate.sh_order) \
             * diffuse_gains(cfg)[None]
 
-    def illumination(self, rotation: np.ndarray | None = None) -> np.ndarray:
-        """(M, 3) pseudo illumination, turned by ``rotation`` (3, 3) when given."""
-        h = self.estimate.sh
+    def illumination(self, rotation: np.ndarray | None = None, light: np.ndarray | None = None) -> np.ndarray:
+        """(M, 3) pseudo illumination (or ``light``), turned by ``rotation`` (3, 3) when given."""
+        h = self.estimate.sh if light is None else light
         return h if rotation is None else sh.rotation_matrix(self.estimate.sh_order, rotation) @ h
 
     def predict(self, camera: Camera, rotation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -51,7 +51,7 @@ class Predictor:
         coverage : (H, W) float32, 1 where the pixel centre sees the mesh.
         """
         est, cfg = self.estimate, self.estimate.config
-        h = self.illumination(rotation)
+        h = self.illumination(rotation, est.light_unknown)
         origins, dirs = camera.pixel_rays()
         face, _ = self.caster.first_hits(origins, dirs)
         hit = np.nonzero(face >= 0)[0]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -13,7 +13,7 @@ from . import sh
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
 from .data import MultiViewData
-from .pipeline import Prepared, prepare
+from .pipeline import Prepared, prepare, pseudo_from_unknown, radiance_unknown, with_config
 from .solver import BilinearResult, solve_bilinear
 
 
@@ -25,6 +25,8 @@ class Estimate:
     ----------
     diffuse, specular : (F, 3) linear albedo (0 where not observed).
     sh : (M, 3) pseudo illumination, unit DC per channel.
+    radiance_sh : (M, 3) radiance L (unit DC) for ``specular_model='lobe'``, whose model
+        needs L itself (h = L x Phong filter loses the degrees where the filter vanishes); else None.
     labels : (F,) int64 cluster of each face, -1 where not observed.
     observed : (F,) bool faces with an estimate.
     method : registry name; config : the EstimatorConfig used.
@@ -39,6 +41,12 @@ class Estimate:
     method: str
     config: EstimatorConfig
     info: dict = field(default_factory=dict)
+    radiance_sh: np.ndarray | None = None
+
+    @property
+    def light_unknown(self) -> np.ndarray:
+        """The light in the form the model multiplies: L for the lobe model, else h."""
+        return self.radiance_sh if radiance_unknown(self.config) else self.sh
 
     @property
     def sh_order(self) -> int:
@@ -68,11 +76,14 @@ class Method(ABC):
     name: ClassVar[str] = ""
     needs_illumination: ClassVar[bool] = False
 
-    def __init__(self, config: EstimatorConfig):
+    def __init__(self, config: EstimatorConfig, known_sh: np.ndarray | None = None,
+                 known_radiance: np.ndarray | None = None):
         self.config = config
+        self.known_sh = known_sh
+        self.known_radiance = known_radiance
 
     @abstractmethod
-    def solve(self, prep: Prepared, known_sh: np.ndarray | None) -> Estimate: ...
+    def solve(self, prep: Prepared) -> Estimate: ...
 
     def _from_groups(self, prep: Prepared, face_group: np.ndarray, result: BilinearResult,
                      observed: np.ndarray, info: dict) -> Estimate:
@@ -83,7 +94,9 @@ class Method(ABC):
         labels = np.where(observed, face_group, -1).astype(np.int64)
         info = {**info, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
                 "lm_steps": [len(r) for r in result.lm_residuals]}
-        return Estimate(diffuse, specular, result.sh, labels, observed, self.name, self.config, info)
+        radiance = result.sh if radiance_unknown(self.config) else None
+        return Estimate(diffuse, specular, pseudo_from_unknown(self.config, result.sh), labels, observed,
+                        self.name, self.config, info, radiance)
 
     def _solve_groups(self, prep: Prepared, face_group: np.ndarray, num_groups: int,
                       fixed_sh: np.ndarray | None = None) -> BilinearResult:
@@ -105,25 +118,30 @@ class BilinearPerFace(Method):
 
     name = "bilinear-per-face"
 
-    def solve(self, prep, known_sh=None):
+    def solve(self, prep):
         group, observed, g = _per_face_groups(prep)
         return self._from_groups(prep, group, self._solve_groups(prep, group, g), observed, {"clusters": g})
 
 
 @register_method
 class KnownIllumination(Method):
-    """The oracle: h fixed to a given pseudo illumination, per-face albedos by linear least squares."""
+    """The oracle: the light fixed to the truth (the pseudo illumination h, or the radiance L
+    for the lobe model), per-face albedos by linear least squares."""
 
     name = "known-illumination"
     needs_illumination = True
 
-    def solve(self, prep, known_sh=None):
-        if known_sh is None:
-            raise ValueError("known-illumination needs the pseudo illumination SH (known_sh)")
+    def solve(self, prep):
+        if radiance_unknown(self.config):
+            known, what = self.known_radiance, "the radiance SH (known_radiance) for specular_model='lobe'"
+        else:
+            known, what = self.known_sh, "the pseudo illumination SH (known_sh)"
+        if known is None:
+            raise ValueError(f"known-illumination needs {what}")
         m = sh.num_coeffs(self.config.sh_order)
         fixed = np.zeros((m, 3))
-        k = min(m, known_sh.shape[0])
-        fixed[:k] = known_sh[:k]
+        k = min(m, known.shape[0])
+        fixed[:k] = known[:k]
         fixed /= np.where(np.abs(fixed[0]) > 0, fixed[0], 1.0)
         group, observed, g = _per_face_groups(prep)
         return self._from_groups(prep, group, self._solve_groups(prep, group, g, fixed), observed, {"clusters": g})
@@ -135,7 +153,7 @@ class MedianColor(Method):
 
     name = "median-color"
 
-    def solve(self, prep, known_sh=None):
+    def solve(self, prep):
         med = prep.all_obs.median_color()
         observed = ~np.isnan(med[:, 0])
         med = np.nan_to_num(med)
@@ -145,7 +163,8 @@ class MedianColor(Method):
         h = np.zeros((sh.num_coeffs(self.config.sh_order), 3))
         h[0] = 1.0
         labels = np.where(observed, np.arange(f), -1)
-        return Estimate(diffuse, specular, h, labels, observed, self.name, self.config, {"clusters": int(observed.sum())})
+        return Estimate(diffuse, specular, h, labels, observed, self.name, self.config,
+                        {"clusters": int(observed.sum())}, h.copy() if radiance_unknown(self.config) else None)
 
 
 @register_method
@@ -155,7 +174,7 @@ class BilinearClustered(Method):
 
     name = "bilinear-clustered"
 
-    def solve(self, prep, known_sh=None):
+    def solve(self, prep):
         c = self.config
         med = prep.all_obs.median_color()
         brightness = np.nan_to_num(med).mean(axis=1)
@@ -209,21 +228,43 @@ def _same_partition(a: np.ndarray, b: np.ndarray) -> bool:
     return len(pairs) == len(np.unique(a)) == len(np.unique(b))
 
 
+EXPONENT_CANDIDATES = (5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0)
+
+
 def estimate(data: MultiViewData, method: str = "bilinear-clustered", config: EstimatorConfig | None = None,
-             known_sh: np.ndarray | None = None, log=None) -> Estimate:
+             known_sh: np.ndarray | None = None, known_radiance: np.ndarray | None = None, log=None,
+             exponent_candidates: tuple[float, ...] | None = None) -> Estimate:
     """Run a registered method on in-memory data (the estimator's one entry point).
 
     Parameters
     ----------
     known_sh : (M', 3) pseudo illumination for 'known-illumination' (truncated/padded to the order).
+    known_radiance : (M', 3) radiance SH, for 'known-illumination' with ``specular_model='lobe'``.
     log : optional callable receiving progress lines.
+    exponent_candidates : estimate the Phong exponent too: solve with each candidate
+        (observations and shadow function computed once) and keep the lowest final
+        residual. Only models that depend on the exponent qualify
+        (``specular_model='lobe'`` or ``diffuse_light='defiltered'``).
     """
     config = config or EstimatorConfig()
     cls = get_method(method)
     t0 = time.perf_counter()
     prep = prepare(data, config, log)
     t = time.perf_counter()
-    est = cls(config).solve(prep, known_sh)
+    if exponent_candidates:
+        if not radiance_unknown(config) and config.diffuse_light != "defiltered":
+            raise ValueError("estimating the Phong exponent needs a model that depends on it: "
+                             "specular_model='lobe' or diffuse_light='defiltered'")
+        tried = {}
+        for n in exponent_candidates:
+            candidate = cls(replace(config, phong_exponent=float(n)), known_sh, known_radiance)
+            tried[float(n)] = candidate.solve(with_config(prep, candidate.config))
+            if log:
+                log(f"phong exponent {n}: residual {tried[float(n)].info['residuals'][-1]:.5f}")
+        est = min(tried.values(), key=lambda e: e.info["residuals"][-1])
+        est.info["exponent_selection"] = {str(n): e.info["residuals"][-1] for n, e in tried.items()}
+    else:
+        est = cls(config, known_sh, known_radiance).solve(prep)
     est.info["timings"] = {**prep.timings, "solve": time.perf_counter() - t, "total": time.perf_counter() - t0}
     est.info["observations"] = int(len(prep.obs.face))
     est.info["observations_all"] = int(len(prep.all_obs.face))

@@ -14,7 +14,7 @@ from estimator.backend import VARIANTS, BackendError
 
 from .atomic import OutputExistsError
 from .dataset import DatasetError
-from .runs import RunError, estimator_settings
+from .runs import RunError, estimator_settings, known_light
 from .scene_spec import SCENES_DIR, SpecError, load_spec, resolve_scene, shipped_scenes
 
 DEFAULT_SCENE = "earth-specular"
@@ -165,21 +165,38 @@ def _config_flags(args) -> dict:
     return {k: getattr(args, k) for k in CONFIG_FLAGS if getattr(args, k, None) is not None}
 
 
+def _positive_float(flag: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{flag} must be a number or 'auto', got {text!r}") from None
+    if not value > 0:
+        raise ValueError(f"{flag} must be > 0, got {value}")
+    return value
+
+
 def cmd_estimate(args) -> int:
-    from estimator import sh
-    from estimator.methods import estimate, get_method
+    from estimator.methods import EXPONENT_CANDIDATES, estimate, get_method
 
     from .dataset import read_dataset
     from .runs import write_run
 
     ds = read_dataset(args.dataset, load_test=False)
-    method, config = estimator_settings(ds.meta, args.method, _config_flags(args))
-    known = None
+    flags = _config_flags(args)
+    candidates = None
+    if flags.get("phong_exponent") == "auto":
+        flags.pop("phong_exponent")
+        candidates = EXPONENT_CANDIDATES
+    elif "phong_exponent" in flags:
+        flags["phong_exponent"] = _positive_float("--phong-exponent", flags["phong_exponent"])
+    method, config = estimator_settings(ds.meta, args.method, flags)
+    known = {}
     if get_method(method).needs_illumination:
         if ds.ground_truth is None:
             raise ValueError(f"method {method} needs the true illumination, and {args.dataset} has no ground_truth/")
-        known = sh.pseudo_illumination(ds.ground_truth.sh, ds.ground_truth.brdf["exponent"])
-    est = estimate(ds.data, method, config, known_sh=known, log=lambda m: print(f"  {m}", file=sys.stderr))
+        known = known_light(ds.ground_truth)
+    est = estimate(ds.data, method, config, **known, log=lambda m: print(f"  {m}", file=sys.stderr),
+                   exponent_candidates=candidates)
     est.info["peak_rss_mib"] = _peak_rss_mib()
     write_run(args.output, est, args.dataset, overwrite=args.overwrite,
               extra={"scene": ds.meta.get("scene")})
@@ -234,7 +251,8 @@ def _add_estimator_flags(p) -> None:
     p.add_argument("--min-cos-view", type=float, help="keep observations with r.n above this (default 0.5)")
     p.add_argument("--diffuse-light", choices=DIFFUSE_LIGHTS)
     p.add_argument("--defilter-order", type=int)
-    p.add_argument("--phong-exponent", type=float)
+    p.add_argument("--phong-exponent", help="Phong exponent of the defiltered/lobe models, or 'auto' to "
+                                            "estimate it (lowest residual over 5..40)")
     p.add_argument("--specular-model", choices=SPECULAR_MODELS,
                    help="mirror (the paper) or lobe (exact cut Phong lobe, needs --phong-exponent)")
     p.add_argument("--variant", choices=VARIANTS + ("auto",))

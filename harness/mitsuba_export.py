@@ -30,8 +30,7 @@ def _model(est: Estimate) -> tuple[float | None, np.ndarray]:
     """(Phong exponent or None for diffuse + mirror, environment SH) of an estimate."""
     cfg = est.config
     if cfg.specular_model == "lobe":
-        inv = 1.0 / sh.expand_per_degree(sh.phong_filter(est.sh_order, cfg.phong_exponent))
-        return cfg.phong_exponent, est.sh * inv[:, None]
+        return cfg.phong_exponent, est.radiance_sh
     if cfg.diffuse_light != "pseudo":
         raise ValueError("the Mitsuba cross-check needs one light for both terms: diffuse_light='pseudo' "
                          "(with specular_model='mirror') or specular_model='lobe'")

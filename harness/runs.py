@@ -33,6 +33,13 @@ def estimator_settings(meta: dict, method: str | None = None, overrides: dict | 
     return method or default_method, EstimatorConfig(**chosen)
 
 
+def known_light(truth) -> dict:
+    """Keyword arguments ``known_sh`` (the true pseudo illumination) and ``known_radiance``
+    (the true radiance SH, unit DC) for the known-illumination oracle."""
+    radiance = truth.sh / np.where(np.abs(truth.sh[0]) > 0, truth.sh[0], 1.0)
+    return {"known_sh": sh.pseudo_illumination(truth.sh, truth.brdf["exponent"]), "known_radiance": radiance}
+
+
 def versions() -> dict:
     """Versions of pseudolight and the libraries that shape its numbers."""
     out = {"python": platform.python_version()}
@@ -52,8 +59,9 @@ def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False,
     Mitsuba's envmap needs non-negative radiance); the exact SH are in estimate.npz.
     """
     with atomic_directory(folder, overwrite=overwrite) as tmp:
+        extra_arrays = {} if est.radiance_sh is None else {"radiance_sh": est.radiance_sh}
         np.savez(os.path.join(tmp, "estimate.npz"), diffuse=est.diffuse, specular=est.specular, sh=est.sh,
-                 sh_order=est.sh_order, labels=est.labels, observed=est.observed)
+                 sh_order=est.sh_order, labels=est.labels, observed=est.observed, **extra_arrays)
         image = sh.to_latlong(est.sh, *ILLUMINATION_MAP_SIZE)
         write_exr(os.path.join(tmp, "illumination.exr"), np.maximum(image, 0.0))
         run = {
@@ -85,7 +93,8 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
     known = {f.name for f in dataclasses.fields(EstimatorConfig)}
     config = EstimatorConfig(**{k: v for k, v in run["parameters"].items() if k in known})
     est = Estimate(data["diffuse"], data["specular"], data["sh"], data["labels"], data["observed"].astype(bool),
-                   run["method"], config, {k: run[k] for k in ("timings",) if k in run})
+                   run["method"], config, {k: run[k] for k in ("timings",) if k in run},
+                   data["radiance_sh"] if "radiance_sh" in data else None)
     return est, run
 
 

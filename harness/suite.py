@@ -5,13 +5,12 @@ import os
 import time
 import tomllib
 
-from estimator import sh
 from estimator.methods import REGISTRY, estimate
 
 from .dataset import read_dataset
 from .generate import generate
 from .reporting import build_report, compare_runs
-from .runs import estimator_settings, write_run
+from .runs import estimator_settings, known_light, write_run
 from .scene_spec import SCENES_DIR, SpecError, load_spec, resolve_scene
 
 
@@ -53,11 +52,11 @@ def run_suite(suite: dict, out_dir: str, profile: str | None = None, mitsuba: bo
             generate(load_spec(resolve_scene(scene), profile), data_dir, overwrite=overwrite)
             log(f"{scene}: dataset in {time.perf_counter() - t:.1f} s")
         ds = read_dataset(data_dir, load_test=False)
-        known = sh.pseudo_illumination(ds.ground_truth.sh, ds.ground_truth.brdf["exponent"])
+        known = known_light(ds.ground_truth)
         for method in suite["methods"]:
             _, config = estimator_settings(ds.meta, method)
             t = time.perf_counter()
-            est = estimate(ds.data, method, config, known_sh=known)
+            est = estimate(ds.data, method, config, **known)
             run_dir = os.path.join(out_dir, scene, method, "run")
             write_run(run_dir, est, data_dir, overwrite=True, extra={"scene": ds.meta.get("scene")})
             report_dir = os.path.join(out_dir, scene, method, "report")

@@ -76,7 +76,7 @@ def test_registry_and_a_new_method_plugs_in(tiny_earth_data):
     class Grey(Method):
         name = "test-grey"
 
-        def solve(self, prep, known_sh=None):
+        def solve(self, prep):
             f = prep.data.mesh.num_faces
             h = np.zeros((sh.num_coeffs(self.config.sh_order), 3))
             h[0] = 1
@@ -99,3 +99,22 @@ def test_config_validation():
         EstimatorConfig(min_cos_view=1.5)
     with pytest.raises(ValueError, match="diffuse_light"):
         EstimatorConfig(diffuse_light="true")
+
+
+def test_exponent_is_estimated_with_the_lobe_model(tiny_earth_data):
+    # the filter vanishes at some degrees for n = 5 (regression: the lobe model solves for L, not h / filter)
+    est = estimate(tiny_earth_data.data, "bilinear-per-face",
+                   EstimatorConfig(components="specular", specular_model="lobe"), exponent_candidates=(5.0, 10.0, 20.0))
+    residuals = {float(k): v for k, v in est.info["exponent_selection"].items()}
+    assert all(np.isfinite(v) for v in residuals.values())
+    assert est.config.phong_exponent == 10.0 and min(residuals, key=residuals.get) == 10.0  # the truth
+    assert est.radiance_sh is not None and np.allclose(est.sh[0], 1.0)
+    np.testing.assert_allclose(est.sh, est.radiance_sh * sh.expand_per_degree(sh.phong_filter(10, 10.0))[:, None])
+    with pytest.raises(ValueError, match="depends on it"):
+        estimate(tiny_earth_data.data, "bilinear-per-face", EstimatorConfig(components="specular", directions=50),
+                 exponent_candidates=(5.0, 10.0))
+
+
+def test_defiltering_refuses_a_vanishing_filter():
+    with pytest.raises(ValueError, match="vanishes"):
+        EstimatorConfig(diffuse_light="defiltered", defilter_order=4, phong_exponent=1.0)
