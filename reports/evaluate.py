@@ -9,7 +9,7 @@ from estimator.data import GroundTruth, TriangleMesh
 from estimator.methods import Estimate
 
 from . import metrics
-from .ground_truth import evaluation_mask, filtered_illumination
+from .ground_truth import evaluation_mask, filtered_illumination, true_irradiance
 
 SCHEMA = "pseudolight-metrics"
 SCHEMA_VERSION = 1
@@ -70,13 +70,16 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
     out["illumination"] = metrics.sh_comparison(est.sh, truth_sh)
     out["faces"] = {"total": int(mesh.num_faces), "estimated": int(est.observed.sum())}
     ratios, albedo = {}, {}
+    irradiance = None
     for component in ("specular", "diffuse"):
         true_albedo = getattr(truth, component)
         est_albedo = getattr(est, component)
         if np.all(true_albedo == 0):
             albedo[component] = {"present": False}
             continue
-        mask = evaluation_mask(mesh, truth, est.observed, component)
+        if irradiance is None:  # shadow function of the truth: computed once, for both components
+            irradiance = true_irradiance(mesh, truth)
+        mask = evaluation_mask(truth, irradiance, est.observed, component)
         entry = {"present": True, "evaluated_faces": int(mask.sum())}
         for scale in metrics.SCALES:
             r = metrics.albedo_ratios(est_albedo, true_albedo, mask, scale, dc)

@@ -27,17 +27,18 @@ def true_irradiance(mesh: TriangleMesh, truth: GroundTruth, order: int = 10, dir
     return c @ truth.sh[: sh.num_coeffs(order)]
 
 
-def evaluation_mask(mesh: TriangleMesh, truth: GroundTruth, observed: np.ndarray, component: str,
+def evaluation_mask(truth: GroundTruth, irradiance: np.ndarray, observed: np.ndarray, component: str,
                     min_albedo: float = 0.02, min_light: float = 0.05) -> np.ndarray:
     """Faces where an albedo can be judged.
 
     A face counts when the estimate observed it, its true albedo (luminance) of
     ``component`` is above ``min_albedo`` x the 99th percentile (non-negligible),
     and it receives light: true irradiance above ``min_light`` x the 95th
-    percentile (faces unlit in every view carry no information).
+    percentile (faces unlit in every view carry no information); ``irradiance`` (F, 3) is
+    :func:`true_irradiance`.
     """
     albedo = (truth.diffuse if component == "diffuse" else truth.specular) @ LUMINANCE
-    light = true_irradiance(mesh, truth) @ LUMINANCE
+    light = irradiance @ LUMINANCE
     big = albedo > min_albedo * max(np.percentile(albedo, 99), 1e-300)
     lit = light > min_light * max(np.percentile(light, 95), 1e-300)
     return observed & big & lit
