@@ -33,7 +33,8 @@ def render_truth(dataset: Dataset, cameras: list[Camera], rotation: np.ndarray |
     light = true_illumination(dataset)
     if rotation is not None:
         light = light.rotated(rotation)
-    spec = json.load(open(os.path.join(dataset.path, "ground_truth", "illumination.json"))).get("scene_spec", {})
+    with open(os.path.join(dataset.path, "ground_truth", "illumination.json")) as f:
+        spec = json.load(f).get("scene_spec", {})
     render = spec.get("render", {})
     spp = spp or int(dataset.meta.get("spp", render.get("spp", 16)))
     integrator = "direct" if light.is_delta else "path"
