@@ -50,9 +50,9 @@ def main() -> None:
     from estimator.methods import estimate
     from estimator.raycast import RayCaster
     from estimator.visibility import compute_visibility, sphere_sampling
-    from harness.dataset import read_dataset
-    from harness.generate import generate
-    from harness.scene_spec import load_spec, resolve_scene
+    from harness.io.dataset import read_dataset
+    from harness.scene.generate import generate
+    from harness.scene.spec import load_spec, resolve_scene
 
     if not os.path.isdir(args.dataset):
         generate(load_spec(resolve_scene("earth-specular"), args.profile), args.dataset)

@@ -6,8 +6,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .sh import phong_filter
-from .solver import COMPONENTS
-
+COMPONENTS = ("both", "specular", "diffuse")
 DIFFUSE_LIGHTS = ("pseudo", "defiltered")
 SPECULAR_MODELS = ("mirror", "lobe")
 
@@ -42,6 +41,19 @@ class EstimatorConfig:
         pseudo illumination) or 'lobe' (the Phong lobe of ``phong_exponent``
         integrated over the sphere with the face's horizon and shadows, times
         the radiance; exact for the Phong BRDF, needs the exponent).
+    min_coverage : a pixel is used only when the object covers at least this share of
+        it (alpha); 0.999 keeps whole pixels and drops silhouette edges, whose colour
+        mixes object and background.
+    recluster_min_shading : re-clustering judges a face's shading-corrected colour only
+        when its diffuse shading is at least this fraction of the
+        ``recluster_shading_percentile`` of all faces' shading: dividing by a small
+        shading amplifies noise, and a quarter of the well-lit level keeps the dim faces
+        of a region while dropping the ones in shadow.
+    lm_damping_start, lm_damping_raise, lm_damping_lower, lm_damping_max : the
+        Levenberg-Marquardt schedule: initial damping, factor on a rejected step,
+        divisor after an accepted one, and the damping at which a step is given up
+        (Madsen, Nielsen & Tingleff's usual values; raising by more than lowering
+        keeps the solver from oscillating between the two).
     variant : Mitsuba variant for the ray queries (None: auto).
     """
 
@@ -62,6 +74,13 @@ class EstimatorConfig:
     defilter_order: int = 2
     phong_exponent: float = 10.0
     specular_model: str = "mirror"
+    min_coverage: float = 0.999
+    recluster_min_shading: float = 0.25
+    recluster_shading_percentile: float = 90.0
+    lm_damping_start: float = 1e-3
+    lm_damping_raise: float = 4.0
+    lm_damping_lower: float = 3.0
+    lm_damping_max: float = 1e8
     variant: str | None = None
 
     def __post_init__(self):
@@ -81,6 +100,12 @@ class EstimatorConfig:
             (0 <= self.defilter_order <= self.sh_order, "defilter_order must lie in [0, sh_order]"),
             (self.phong_exponent > 0, "phong_exponent must be > 0"),
             (self.specular_model in SPECULAR_MODELS, f"specular_model must be one of {SPECULAR_MODELS}"),
+            (0 < self.min_coverage <= 1, "min_coverage must lie in (0, 1]"),
+            (0 <= self.recluster_min_shading < 1, "recluster_min_shading must lie in [0, 1)"),
+            (0 < self.recluster_shading_percentile <= 100, "recluster_shading_percentile must lie in (0, 100]"),
+            (self.lm_damping_start > 0 and self.lm_damping_max > self.lm_damping_start,
+             "lm_damping_start must be > 0 and below lm_damping_max"),
+            (self.lm_damping_raise > 1 and self.lm_damping_lower > 1, "lm_damping_raise and lm_damping_lower must be > 1"),
         ]
         for ok, message in checks:
             if not ok:
@@ -90,6 +115,11 @@ class EstimatorConfig:
             if np.any(np.abs(f) < 1e-6):
                 raise ValueError(f"estimator config: the Phong filter of exponent {self.phong_exponent} vanishes "
                                  f"below degree {self.defilter_order}; lower defilter_order")
+
+    @property
+    def lm_schedule(self) -> tuple[float, float, float, float]:
+        """(start, raise, lower, max) damping of the Levenberg-Marquardt solve."""
+        return self.lm_damping_start, self.lm_damping_raise, self.lm_damping_lower, self.lm_damping_max
 
     def to_dict(self) -> dict:
         return asdict(self)

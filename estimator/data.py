@@ -1,4 +1,4 @@
-"""Typed in-memory inputs of the estimator: a mesh, views and (optionally) ground truth.
+"""The estimator's data types: its inputs (a mesh and calibrated views) and its result.
 
 File formats live in ``harness``; these classes only hold and validate arrays,
 so the estimator works on any data source.
@@ -6,10 +6,16 @@ so the estimator works on any data source.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from . import sh
 from .camera import Camera
+from .config import EstimatorConfig
+
+if TYPE_CHECKING:
+    from .models import ReflectionModel
 
 
 @dataclass(frozen=True)
@@ -118,26 +124,45 @@ class MultiViewData:
             raise ValueError("the dataset has no frames (training views)")
 
 
-@dataclass(frozen=True)
-class GroundTruth:
-    """Exactly known truth of a synthetic dataset.
+@dataclass
+class Estimate:
+    """The result of a method, per face in ``mesh.ply`` order.
 
     Attributes
     ----------
-    diffuse, specular : (F, 3) linear per-face albedo (area average over each face).
-    sh : (M, 3) SH of the true radiance illumination (not filtered).
-    brdf : dict, e.g. {'model': 'phong', 'exponent': 10.0}.
-    illumination : dict describing the light (lights list, or environment map).
-    regions : (F,) int region of each face, or None.
+    diffuse, specular : (F, 3) linear albedo (0 where not observed).
+    pseudo_sh : (M, 3) pseudo illumination h, unit DC per channel.
+    labels : (F,) int64 cluster of each face, -1 where not observed.
+    observed : (F,) bool faces with an estimate.
+    method : registry name; config : the EstimatorConfig used.
+    info : timings (s) per stage, solver residuals, counts.
+    radiance_sh : (M, 3) radiance L (unit DC) when the reflection model solves for it
+        (``specular_model='lobe'``: h = L x Phong filter loses the degrees where the
+        filter vanishes); else None.
     """
 
     diffuse: np.ndarray
     specular: np.ndarray
-    sh: np.ndarray
-    brdf: dict
-    illumination: dict
-    regions: np.ndarray | None = None
+    pseudo_sh: np.ndarray
+    labels: np.ndarray
+    observed: np.ndarray
+    method: str
+    config: EstimatorConfig
+    info: dict = field(default_factory=dict)
+    radiance_sh: np.ndarray | None = None
+
+    @property
+    def model(self) -> "ReflectionModel":
+        """The reflection model of ``config``."""
+        from .models import reflection_model
+
+        return reflection_model(self.config)
+
+    @property
+    def light(self) -> np.ndarray:
+        """(M, 3) the light unknown of the model: L for a radiance model, else h."""
+        return self.radiance_sh if self.model.light == "radiance" else self.pseudo_sh
 
     @property
     def sh_order(self) -> int:
-        return int(round(np.sqrt(self.sh.shape[0]))) - 1
+        return sh.order_of(self.pseudo_sh.shape[0])

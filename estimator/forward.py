@@ -5,16 +5,14 @@ import numpy as np
 
 from . import sh
 from .camera import Camera
-from .data import TriangleMesh
-from .methods import Estimate
-from .pipeline import diffuse_gains, specular_rows
+from .data import Estimate, TriangleMesh
 from .raycast import RayCaster
-from .reflection import diffuse_matrix, mirror_directions
+from .reflection import mirror_directions
 from .visibility import compute_visibility, sphere_sampling
 
 
 class Predictor:
-    """Renders R = t_d sum h C + t_s sum h D per pixel, with the estimate's own settings.
+    """Renders an estimate's reflection model, R = t_d (C . x) + t_s (D . x), per pixel.
 
     The diffuse matrix and shadow function are computed once; each pixel uses
     its face (centre ray), the mirrored direction of its own view ray, and the
@@ -29,18 +27,16 @@ class Predictor:
     def __init__(self, mesh: TriangleMesh, estimate: Estimate):
         if estimate.diffuse.shape[0] != mesh.num_faces:
             raise ValueError(f"the estimate has {estimate.diffuse.shape[0]} faces, the mesh {mesh.num_faces}")
-        self.mesh, self.estimate = mesh, estimate
-        cfg = estimate.config
-        self.caster = RayCaster(mesh, cfg.variant)
-        self.sampling = sphere_sampling(cfg.directions)
+        self.mesh, self.estimate, self.model = mesh, estimate, estimate.model
+        self.caster = RayCaster(mesh, estimate.config.variant)
+        self.sampling = sphere_sampling(estimate.config.directions)
         self.visibility = compute_visibility(self.caster, self.sampling)
-        self.c_matrix = diffuse_matrix(mesh, self.sampling, self.visibility, estimate.sh_order) \
-            * diffuse_gains(cfg)[None]
+        self.c_matrix = self.model.diffuse_matrix(mesh, self.sampling, self.visibility)
 
-    def illumination(self, rotation: np.ndarray | None = None, light: np.ndarray | None = None) -> np.ndarray:
-        """(M, 3) pseudo illumination (or ``light``), turned by ``rotation`` (3, 3) when given."""
-        h = self.estimate.sh if light is None else light
-        return h if rotation is None else sh.rotation_matrix(self.estimate.sh_order, rotation) @ h
+    def light(self, rotation: np.ndarray | None = None) -> np.ndarray:
+        """(M, 3) the estimate's light unknown, turned by ``rotation`` (3, 3) when given."""
+        x = self.estimate.light
+        return x if rotation is None else sh.rotation_matrix(self.estimate.sh_order, rotation) @ x
 
     def predict(self, camera: Camera, rotation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Predicted image of ``camera``.
@@ -50,15 +46,14 @@ class Predictor:
         rgb : (H, W, 3) float32 linear; 0 on background and unestimated faces.
         coverage : (H, W) float32, 1 where the pixel centre sees the mesh.
         """
-        est, cfg = self.estimate, self.estimate.config
-        h = self.illumination(rotation, est.light_unknown)
+        est = self.estimate
         origins, dirs = camera.pixel_rays()
         face, _ = self.caster.first_hits(origins, dirs)
         hit = np.nonzero(face >= 0)[0]
         f = face[hit]
         mirror = mirror_directions(self.mesh.face_normals[f], -dirs[hit])
-        d_rows = specular_rows(cfg, f, mirror, self.sampling, self.visibility)
-        value = est.diffuse[f] * (self.c_matrix[f] @ h) + est.specular[f] * (d_rows @ h)
+        d_rows = self.model.specular_rows(f, mirror, self.sampling, self.visibility)
+        value = self.model.predict(est.diffuse[f], est.specular[f], self.c_matrix[f], d_rows, self.light(rotation))
         rgb = np.zeros((camera.height * camera.width, 3), dtype=np.float32)
         rgb[hit] = value
         coverage = (face >= 0).astype(np.float32)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import ClassVar
 
 import numpy as np
@@ -12,45 +12,10 @@ import numpy as np
 from . import sh
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
-from .data import MultiViewData
-from .pipeline import Prepared, prepare, pseudo_from_unknown, radiance_unknown, with_config
+from .data import Estimate, MultiViewData
+from .models import reflection_model
+from .pipeline import Prepared, prepare, with_config
 from .solver import BilinearResult, solve_bilinear
-
-
-@dataclass
-class Estimate:
-    """The result of a method, per face in ``mesh.ply`` order.
-
-    Attributes
-    ----------
-    diffuse, specular : (F, 3) linear albedo (0 where not observed).
-    sh : (M, 3) pseudo illumination, unit DC per channel.
-    radiance_sh : (M, 3) radiance L (unit DC) for ``specular_model='lobe'``, whose model
-        needs L itself (h = L x Phong filter loses the degrees where the filter vanishes); else None.
-    labels : (F,) int64 cluster of each face, -1 where not observed.
-    observed : (F,) bool faces with an estimate.
-    method : registry name; config : the EstimatorConfig used.
-    info : timings (s) per stage, solver residuals, counts.
-    """
-
-    diffuse: np.ndarray
-    specular: np.ndarray
-    sh: np.ndarray
-    labels: np.ndarray
-    observed: np.ndarray
-    method: str
-    config: EstimatorConfig
-    info: dict = field(default_factory=dict)
-    radiance_sh: np.ndarray | None = None
-
-    @property
-    def light_unknown(self) -> np.ndarray:
-        """The light in the form the model multiplies: L for the lobe model, else h."""
-        return self.radiance_sh if radiance_unknown(self.config) else self.sh
-
-    @property
-    def sh_order(self) -> int:
-        return int(round(np.sqrt(self.sh.shape[0]))) - 1
 
 
 REGISTRY: dict[str, type["Method"]] = {}
@@ -79,6 +44,7 @@ class Method(ABC):
     def __init__(self, config: EstimatorConfig, known_sh: np.ndarray | None = None,
                  known_radiance: np.ndarray | None = None):
         self.config = config
+        self.model = reflection_model(config)
         self.known_sh = known_sh
         self.known_radiance = known_radiance
 
@@ -94,15 +60,15 @@ class Method(ABC):
         labels = np.where(observed, face_group, -1).astype(np.int64)
         info = {**info, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
                 "lm_steps": [len(r) for r in result.lm_residuals]}
-        radiance = result.sh if radiance_unknown(self.config) else None
-        return Estimate(diffuse, specular, pseudo_from_unknown(self.config, result.sh), labels, observed,
+        radiance = result.light if self.model.light == "radiance" else None
+        return Estimate(diffuse, specular, self.model.pseudo_from_light(result.light), labels, observed,
                         self.name, self.config, info, radiance)
 
     def _solve_groups(self, prep: Prepared, face_group: np.ndarray, num_groups: int,
-                      fixed_sh: np.ndarray | None = None) -> BilinearResult:
+                       fixed_light: np.ndarray | None = None) -> BilinearResult:
         c = self.config
         return solve_bilinear(prep.obs.rgb, face_group[prep.obs.face], prep.c_rows, prep.d_rows, num_groups,
-                              c.components, c.iterations, c.tol, fixed_sh)
+                              c.components, c.iterations, c.tol, fixed_light, schedule=c.lm_schedule)
 
 
 def _per_face_groups(prep: Prepared) -> tuple[np.ndarray, np.ndarray, int]:
@@ -132,12 +98,9 @@ class KnownIllumination(Method):
     needs_illumination = True
 
     def solve(self, prep):
-        if radiance_unknown(self.config):
-            known, what = self.known_radiance, "the radiance SH (known_radiance) for specular_model='lobe'"
-        else:
-            known, what = self.known_sh, "the pseudo illumination SH (known_sh)"
+        known, what = self.model.known_light(self.known_sh, self.known_radiance)
         if known is None:
-            raise ValueError(f"known-illumination needs {what}")
+            raise ValueError(f"known-illumination needs {what} for the {self.model.name!r} reflection model")
         m = sh.num_coeffs(self.config.sh_order)
         fixed = np.zeros((m, 3))
         k = min(m, known.shape[0])
@@ -164,7 +127,7 @@ class MedianColor(Method):
         h[0] = 1.0
         labels = np.where(observed, np.arange(f), -1)
         return Estimate(diffuse, specular, h, labels, observed, self.name, self.config,
-                        {"clusters": int(observed.sum())}, h.copy() if radiance_unknown(self.config) else None)
+                        {"clusters": int(observed.sum())}, h.copy() if self.model.light == "radiance" else None)
 
 
 @register_method
@@ -204,21 +167,21 @@ class BilinearClustered(Method):
                 "clusters_per_round": history, "clustering_s": time.perf_counter() - t}
         return self._from_groups(prep, face_group, result, observed, info)
 
-    @staticmethod
-    def _shading_corrected(prep, face_group, result, med):
+    def _shading_corrected(self, prep, face_group, result, med):
         """Per-face diffuse albedo with the light and the cluster's specular albedo fixed
         (the paper divides colours by the diffuse shading sum h C)."""
         obs = prep.obs
         f = len(med)
-        shade_face = prep.c_matrix @ result.sh                                  # (F, 3)
-        spec = result.specular[face_group[obs.face]] * (prep.d_rows @ result.sh)
+        shade_face = prep.c_matrix @ result.light                               # (F, 3)
+        spec = result.specular[face_group[obs.face]] * (prep.d_rows @ result.light)
         num = np.stack([np.bincount(obs.face, (obs.rgb[:, k] - spec[:, k]), minlength=f) for k in range(3)], 1)
         cnt = np.bincount(obs.face, minlength=f)[:, None]
         with np.errstate(invalid="ignore", divide="ignore"):
             diffuse_colour = np.where(cnt > 0, num / np.maximum(cnt, 1), med)
             albedo = diffuse_colour / shade_face
         lum = shade_face.mean(axis=1)
-        valid = (lum > 0.25 * np.percentile(lum, 90)) & np.all(np.isfinite(albedo), axis=1)
+        level = np.percentile(lum, self.config.recluster_shading_percentile)
+        valid = (lum > self.config.recluster_min_shading * level) & np.all(np.isfinite(albedo), axis=1)
         return np.where(np.isfinite(albedo), albedo, 0.0), valid
 
 
@@ -252,7 +215,7 @@ def estimate(data: MultiViewData, method: str = "bilinear-clustered", config: Es
     prep = prepare(data, config, log)
     t = time.perf_counter()
     if exponent_candidates:
-        if not radiance_unknown(config) and config.diffuse_light != "defiltered":
+        if not reflection_model(config).uses_exponent:
             raise ValueError("estimating the Phong exponent needs a model that depends on it: "
                              "specular_model='lobe' or diffuse_light='defiltered'")
         tried = {}

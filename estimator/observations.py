@@ -16,25 +16,20 @@ class Observations:
     Attributes
     ----------
     face : (N,) int64 face index.
-    view : (N,) int64 view index.
     rgb : (N, 3) float64 mean colour of the pixels whose centre ray hits the face.
-    pixels : (N,) int64 number of those pixels.
     view_dir : (N, 3) unit direction from the face centroid to the camera.
     num_faces, num_views : int
     """
 
     face: np.ndarray
-    view: np.ndarray
     rgb: np.ndarray
-    pixels: np.ndarray
     view_dir: np.ndarray
     num_faces: int
     num_views: int
 
     def subset(self, keep: np.ndarray) -> "Observations":
         """The rows where ``keep`` (N,) is true."""
-        return Observations(self.face[keep], self.view[keep], self.rgb[keep], self.pixels[keep],
-                            self.view_dir[keep], self.num_faces, self.num_views)
+        return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views)
 
     def observed_faces(self) -> np.ndarray:
         """(F,) bool: faces with at least one row."""
@@ -73,7 +68,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     centroids = mesh.centroids
     parts = []
     buffers = caster.face_id_buffers([v.camera for v in views], pure=pure_pixels)
-    for index, (view, ids) in enumerate(zip(views, buffers)):
+    for view, ids in zip(views, buffers):
         ids = ids.ravel()
         valid = ids >= 0
         if view.alpha is not None:
@@ -85,13 +80,12 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         faces = np.nonzero(counts >= max(min_pixels, 1))[0]
         to_cam = view.camera.center[None] - centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
-        parts.append((faces, np.full(len(faces), index), sums[faces] / counts[faces, None], counts[faces], to_cam))
+        parts.append((faces, sums[faces] / counts[faces, None], to_cam))
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
     if len(blind) == len(views):
         raise ValueError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
     if blind:
         raise ValueError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
-    face, view_i, rgb, pixels, view_dir = (np.concatenate(p) for p in zip(*parts))
-    return Observations(face.astype(np.int64), view_i.astype(np.int64), rgb, pixels.astype(np.int64),
-                        view_dir, f, len(views))
+    face, rgb, view_dir = (np.concatenate(p) for p in zip(*parts))
+    return Observations(face.astype(np.int64), rgb, view_dir, f, len(views))

@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import sh
 from .config import EstimatorConfig
 from .data import MultiViewData
+from .models import ReflectionModel, reflection_model
 from .observations import Observations, gather_observations
 from .raycast import RayCaster
-from .reflection import diffuse_matrix, lobe_matrix, mirror_directions, mirror_matrix
+from .reflection import mirror_directions
 from .visibility import SphereSampling, Visibility, compute_visibility, sphere_sampling
 
 
@@ -21,16 +21,18 @@ class Prepared:
 
     Attributes
     ----------
+    model : the reflection model of ``config``.
     all_obs : every observation (for median colours).
     obs : observations kept for the solve (``min_cos_view`` cut).
-    c_matrix : (F, M) diffuse matrix C, columns scaled by :func:`diffuse_gains`.
-    d_rows : (N, M) specular rows of ``obs`` (:func:`specular_rows`). Both multiply the
-        solver's light unknown: h, or L for the lobe model (:func:`radiance_unknown`).
+    c_matrix : (F, M) the model's diffuse rows of every face.
+    d_rows : (N, M) the model's specular rows of ``obs``. Both multiply the model's
+        light unknown (h, or L for a radiance model).
     timings : seconds per stage.
     """
 
     data: MultiViewData
     config: EstimatorConfig
+    model: ReflectionModel
     caster: RayCaster
     sampling: SphereSampling
     visibility: Visibility
@@ -46,56 +48,24 @@ class Prepared:
         return self.c_matrix[self.obs.face]
 
 
-def radiance_unknown(config: EstimatorConfig) -> bool:
-    """True when the solver's light unknown is the radiance L (``specular_model='lobe'``),
-    False when it is the pseudo illumination h (the paper's model)."""
-    return config.specular_model == "lobe"
-
-
-def diffuse_gains(config: EstimatorConfig) -> np.ndarray:
-    """Per-coefficient gains on C turning the solver's light unknown into the light of the
-    diffuse term: ones (the paper: h; or the lobe model: L itself), or 1 / (Phong filter)
-    up to ``defilter_order`` (``diffuse_light='defiltered'``). Shape ((L + 1)^2,)."""
-    gains = np.ones(config.sh_order + 1)
-    if not radiance_unknown(config) and config.diffuse_light == "defiltered":
-        f = sh.phong_filter(config.sh_order, config.phong_exponent)
-        gains[: config.defilter_order + 1] = 1.0 / f[: config.defilter_order + 1]
-    return sh.expand_per_degree(gains)
-
-
-def specular_rows(config: EstimatorConfig, faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
-                  visibility: Visibility) -> np.ndarray:
-    """(N, M) rows multiplying the light unknown in the specular term (mirror matrix D for h,
-    or the lobe matrix for L)."""
-    if radiance_unknown(config):
-        return lobe_matrix(faces, mirror, sampling, visibility, config.sh_order, config.phong_exponent)
-    return mirror_matrix(faces, mirror, sampling, visibility, config.sh_order)
-
-
-def pseudo_from_unknown(config: EstimatorConfig, unknown: np.ndarray) -> np.ndarray:
-    """The pseudo illumination h (M, C) from the solver's light unknown (M, C)."""
-    if radiance_unknown(config):
-        return unknown * sh.expand_per_degree(sh.phong_filter(config.sh_order, config.phong_exponent))[:, None]
-    return unknown
-
-
-def _model_matrices(data: MultiViewData, config: EstimatorConfig, sampling: SphereSampling,
+def _model_matrices(data: MultiViewData, model: ReflectionModel, sampling: SphereSampling,
                     visibility: Visibility, obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-    c_matrix = diffuse_matrix(data.mesh, sampling, visibility, config.sh_order) * diffuse_gains(config)[None]
+    c_matrix = model.diffuse_matrix(data.mesh, sampling, visibility)
     mirror = mirror_directions(data.mesh.face_normals[obs.face], obs.view_dir)
-    return c_matrix, specular_rows(config, obs.face, mirror, sampling, visibility)
+    return c_matrix, model.specular_rows(obs.face, mirror, sampling, visibility)
 
 
 def with_config(prep: Prepared, config: EstimatorConfig) -> Prepared:
     """The same observations and shadow function under another model configuration
     (e.g. another Phong exponent): only the reflection matrices are recomputed."""
-    for key in ("directions", "min_cos_view", "min_pixels", "pure_pixels", "variant"):
+    for key in ("directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "variant"):
         if getattr(config, key) != getattr(prep.config, key):
             raise ValueError(f"with_config cannot change {key}; run prepare() again")
     t = time.perf_counter()
-    c_matrix, d_rows = _model_matrices(prep.data, config, prep.sampling, prep.visibility, prep.obs)
+    model = reflection_model(config)
+    c_matrix, d_rows = _model_matrices(prep.data, model, prep.sampling, prep.visibility, prep.obs)
     timings = {**prep.timings, "reflection": time.perf_counter() - t}
-    return Prepared(prep.data, config, prep.caster, prep.sampling, prep.visibility, prep.all_obs, prep.obs,
+    return Prepared(prep.data, config, model, prep.caster, prep.sampling, prep.visibility, prep.all_obs, prep.obs,
                     c_matrix, d_rows, timings)
 
 
@@ -105,7 +75,7 @@ def prepare(data: MultiViewData, config: EstimatorConfig, log=None) -> Prepared:
     timings = {}
     t = time.perf_counter()
     caster = RayCaster(data.mesh, config.variant)
-    all_obs = gather_observations(caster, data.views, config.min_pixels, pure_pixels=config.pure_pixels)
+    all_obs = gather_observations(caster, data.views, config.min_pixels, config.min_coverage, config.pure_pixels)
     normals = data.mesh.face_normals
     cos_view = np.sum(normals[all_obs.face] * all_obs.view_dir, axis=1)
     obs = all_obs.subset(cos_view > config.min_cos_view)
@@ -122,6 +92,7 @@ def prepare(data: MultiViewData, config: EstimatorConfig, log=None) -> Prepared:
     say(f"visibility: {data.mesh.num_faces} faces x {config.directions} directions")
 
     t = time.perf_counter()
-    c_matrix, d_rows = _model_matrices(data, config, sampling, visibility, obs)
+    model = reflection_model(config)
+    c_matrix, d_rows = _model_matrices(data, model, sampling, visibility, obs)
     timings["reflection"] = time.perf_counter() - t
-    return Prepared(data, config, caster, sampling, visibility, all_obs, obs, c_matrix, d_rows, timings)
+    return Prepared(data, config, model, caster, sampling, visibility, all_obs, obs, c_matrix, d_rows, timings)

@@ -30,6 +30,14 @@ def num_coeffs(order: int) -> int:
     return (order + 1) ** 2
 
 
+def order_of(count: int) -> int:
+    """The order L of an expansion with ``count`` = (L + 1)^2 coefficients."""
+    order = int(round(np.sqrt(count))) - 1
+    if order < 0 or (order + 1) ** 2 != count:
+        raise ValueError(f"{count} is not a number of SH coefficients (L + 1)^2")
+    return order
+
+
 def index(l: int, m: int) -> int:
     """Flat index l (l + 1) + m of coefficient (l, m)."""
     return l * (l + 1) + m
@@ -155,7 +163,7 @@ def project_latlong(order: int, image: np.ndarray) -> np.ndarray:
 def to_latlong(coeffs: np.ndarray, height: int, width: int) -> np.ndarray:
     """Evaluate SH coefficients (M, C) on a lat-long map, shape (H, W, C)."""
     coeffs = np.asarray(coeffs, dtype=np.float64)
-    order = int(round(np.sqrt(coeffs.shape[0]))) - 1
+    order = order_of(coeffs.shape[0])
     if num_coeffs(order) != coeffs.shape[0]:
         raise ValueError(f"{coeffs.shape[0]} is not a square number of SH coefficients")
     dirs = latlong.directions(height, width).reshape(-1, 3)
@@ -198,7 +206,7 @@ def pseudo_illumination(radiance: np.ndarray, exponent: float, order: int | None
     ``exponent``, truncated to ``order`` and normalised to unit DC per channel
     (the estimate's gauge)."""
     radiance = np.asarray(radiance, dtype=np.float64)
-    have = int(round(np.sqrt(radiance.shape[0]))) - 1
+    have = order_of(radiance.shape[0])
     order = have if order is None else order
     if order > have:
         raise ValueError(f"the radiance SH have order {have}, cannot filter to order {order}")

@@ -6,7 +6,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import sparse
 
-COMPONENTS = ("both", "specular", "diffuse")
+from .config import COMPONENTS, EstimatorConfig
+
+LM_SCHEDULE = EstimatorConfig().lm_schedule
 
 
 @dataclass
@@ -16,14 +18,15 @@ class BilinearResult:
     Attributes
     ----------
     diffuse, specular : (G, 3) albedo of each group.
-    sh : (M, 3) pseudo illumination, DC coefficient 1 per channel (the scale gauge).
+    light : (M, 3) the light unknown of the reflection model (pseudo illumination h or
+        radiance L), DC coefficient 1 per channel (the scale gauge).
     residuals : relative residual ||R - model|| / ||R|| after each ALS step, then after LM.
     lm_residuals : per channel, the channel's relative residual after each accepted LM step.
     """
 
     diffuse: np.ndarray
     specular: np.ndarray
-    sh: np.ndarray
+    light: np.ndarray
     residuals: list[float] = field(default_factory=list)
     lm_residuals: list[list[float]] = field(default_factory=list)
 
@@ -58,11 +61,14 @@ def _features(components: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return {"both": np.stack([a, b], 1), "specular": b[:, None], "diffuse": a[:, None]}[components]
 
 
-def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterations, tol, residuals, norm):
+def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterations, tol, residuals, norm,
+                schedule=LM_SCHEDULE):
     """Levenberg-Marquardt on one channel, albedos eliminated by their Schur complement.
 
-    alb : (G, P) albedos of the unknown components; h : (M,) light. Returns refined (alb, h).
+    alb : (G, P) albedos of the unknown components; h : (M,) light. ``schedule``: (start,
+    raise, lower, max) damping. Returns refined (alb, h).
     """
+    lam, lam_raise, lam_lower, lam_max = schedule
     indicator = sparse.csr_matrix((np.ones(len(group)), (group, np.arange(len(group)))),
                                   shape=(num_groups, len(group)))
 
@@ -77,7 +83,6 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
 
     feats, pred = model(alb, h)
     cost = float(np.sum((r - pred) ** 2))
-    lam = 1e-3
     m, p = len(h), alb.shape[1]
     for _ in range(iterations):
         e = r - pred
@@ -100,14 +105,14 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
             alb_new, h_new = np.maximum(alb + dalb, 0.0), h + dh
             feats_new, pred_new = model(alb_new, h_new)
             cost_new = float(np.sum((r - pred_new) ** 2))
-            if cost_new < cost or lam > 1e8:
+            if cost_new < cost or lam > lam_max:
                 break
-            lam *= 4.0
+            lam *= lam_raise
         if cost_new >= cost:
             break
         improvement = (cost - cost_new) / max(cost, 1e-300)
         alb, h, feats, pred, cost = alb_new, h_new, feats_new, pred_new, cost_new
-        lam = max(lam / 3.0, 1e-9)
+        lam = max(lam / lam_lower, 1e-9)
         residuals.append(np.sqrt(cost) / norm)
         if improvement < tol:
             break
@@ -116,8 +121,9 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
 
 def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_rows: np.ndarray,
                    num_groups: int, components: str = "both", iterations: int = 20, tol: float = 1e-6,
-                   fixed_sh: np.ndarray | None = None, ridge: float = 1e-9,
-                   als_iterations: int = 5) -> BilinearResult:
+                   fixed_light: np.ndarray | None = None, ridge: float = 1e-9,
+                   als_iterations: int = 5, schedule: tuple[float, float, float, float] = LM_SCHEDULE
+                   ) -> BilinearResult:
     """Solve the bilinear system: alternating least squares, then Levenberg-Marquardt.
 
     The model of observation k (face i in group g, one colour channel) is
@@ -137,9 +143,10 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
     components : 'both', 'specular' (t_d = 0) or 'diffuse' (t_s = 0).
     iterations : cap on the Levenberg-Marquardt steps.
     tol : stop when the squared residual improves by less than this fraction.
-    fixed_sh : (M, 3) known pseudo illumination: only albedos are solved.
+    fixed_light : (M, 3) known light: only albedos are solved.
     ridge : Tikhonov weight of the ALS light step, relative to the mean diagonal.
     als_iterations : ALS steps before Levenberg-Marquardt.
+    schedule : Levenberg-Marquardt damping (start, raise, lower, max).
 
     Returns
     -------
@@ -152,8 +159,8 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
         raise ValueError("solve_bilinear: rgb (N, 3), group (N,), c_rows and d_rows (N, M) must agree")
     h = np.zeros((m, 3))
     h[0] = 1.0
-    if fixed_sh is not None:
-        h = np.array(fixed_sh, dtype=np.float64)
+    if fixed_light is not None:
+        h = np.array(fixed_light, dtype=np.float64)
     td, ts = np.zeros((num_groups, 3)), np.zeros((num_groups, 3))
     norm = max(float(np.linalg.norm(rgb)), 1e-300)
     residuals: list[float] = []
@@ -162,24 +169,24 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
         pred = td[group] * (c_rows @ h) + ts[group] * (d_rows @ h)
         return float(np.linalg.norm(rgb - pred) / norm)
 
-    for _ in range(1 if fixed_sh is not None else als_iterations):
+    for _ in range(1 if fixed_light is not None else als_iterations):
         for ch in range(3):
             td[:, ch], ts[:, ch] = _solve_albedos(rgb[:, ch], c_rows @ h[:, ch], d_rows @ h[:, ch],
                                                   group, num_groups, components)
-        if fixed_sh is None:
+        if fixed_light is None:
             for ch in range(3):
                 rows = td[group, ch, None] * c_rows + ts[group, ch, None] * d_rows
                 gram = rows.T @ rows
                 gram[np.diag_indices(m)] += ridge * np.trace(gram) / m
                 h[:, ch] = np.linalg.solve(gram, rows.T @ rgb[:, ch])
         residuals.append(relative_residual())
-    if fixed_sh is None and iterations > 0:
+    if fixed_light is None and iterations > 0:
         lm_residuals = [[] for _ in range(3)]
         for ch in range(3):
             alb = {"both": np.stack([td[:, ch], ts[:, ch]], 1), "specular": ts[:, ch, None],
                    "diffuse": td[:, ch, None]}[components]
             alb, h[:, ch] = _lm_channel(rgb[:, ch], group, num_groups, c_rows, d_rows, alb, h[:, ch],
-                                        components, iterations, tol, lm_residuals[ch], norm)
+                                        components, iterations, tol, lm_residuals[ch], norm, schedule)
             if components == "both":
                 td[:, ch], ts[:, ch] = alb[:, 0], alb[:, 1]
             elif components == "specular":

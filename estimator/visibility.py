@@ -13,18 +13,16 @@ from .sh import fibonacci_sphere
 
 @dataclass(frozen=True)
 class SphereSampling:
-    """Directions spread uniformly on the unit sphere and their triangulation.
+    """Directions spread uniformly on the unit sphere with quadrature weights.
 
     Attributes
     ----------
     directions : (K, 3) unit vectors.
-    triangles : (T, 3) indices into ``directions`` (convex hull, T = 2K - 4).
     weights : (K,) quadrature weights: a vertex gets a third of the area of
         each hull triangle around it (the paper's Eq. 13), normalised to sum to 4 pi.
     """
 
     directions: np.ndarray
-    triangles: np.ndarray
     weights: np.ndarray
 
     def nearest(self, dirs: np.ndarray) -> np.ndarray:
@@ -33,9 +31,9 @@ class SphereSampling:
 
 
 def sphere_sampling(count: int = 1164) -> SphereSampling:
-    """``count`` golden-spiral directions with their convex-hull triangulation.
+    """``count`` golden-spiral directions, weighted by their convex-hull triangulation.
 
-    The paper uses 1164 directions (2324 triangles).
+    The paper uses 1164 directions (2324 hull triangles).
     """
     dirs = fibonacci_sphere(count)
     tris = ConvexHull(dirs).simplices
@@ -43,7 +41,7 @@ def sphere_sampling(count: int = 1164) -> SphereSampling:
     areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     weights = np.zeros(count)
     np.add.at(weights, tris.ravel(), np.repeat(areas / 3.0, 3))
-    return SphereSampling(dirs, tris, weights * (4.0 * np.pi / weights.sum()))
+    return SphereSampling(dirs, weights * (4.0 * np.pi / weights.sum()))
 
 
 @dataclass(frozen=True)

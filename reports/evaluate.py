@@ -5,11 +5,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.data import GroundTruth, TriangleMesh
-from estimator.methods import Estimate
+from estimator.data import Estimate, TriangleMesh
 
 from . import metrics
-from .ground_truth import evaluation_mask, filtered_illumination, true_irradiance
+from .ground_truth import GroundTruth, evaluation_mask, filtered_illumination, true_irradiance
 
 SCHEMA = "pseudolight-metrics"
 SCHEMA_VERSION = 1
@@ -55,19 +54,21 @@ class Evaluation:
 
 def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: ImageSet | None = None,
              relit: ImageSet | None = None, cross_check: ImageSet | None = None,
-             cross_check_tolerance: float = 0.01) -> Evaluation:
+             cross_check_tolerance: float = 0.01, shadow: tuple | None = None) -> Evaluation:
     """Compare an estimate with ground truth the way the paper and today's benchmarks do.
 
     Albedos are compared per face as ratios estimated / true after one global
     scale, in two ways (see :func:`reports.metrics.albedo_ratios`): 'dc' (the
     paper's unit-DC normalisation, nothing fitted) and 'lstsq' (per-channel
     least-squares scale, as Stanford-ORB), on the faces of
-    :func:`reports.ground_truth.evaluation_mask`.
+    :func:`reports.ground_truth.evaluation_mask`. ``shadow`` = (sampling, visibility):
+    a shadow function of the mesh already computed (e.g. the predictor's), reused
+    for the true irradiance.
     """
     truth_sh = filtered_illumination(truth, est.sh_order)
-    dc = truth.sh[0]  # DC of the true radiance per channel (the Phong filter is 1 at l = 0)
+    dc = truth.radiance_sh[0]  # DC of the true radiance per channel (the Phong filter is 1 at l = 0)
     out: dict = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION}
-    out["illumination"] = metrics.sh_comparison(est.sh, truth_sh)
+    out["illumination"] = metrics.sh_comparison(est.pseudo_sh, truth_sh)
     out["faces"] = {"total": int(mesh.num_faces), "estimated": int(est.observed.sum())}
     ratios, albedo = {}, {}
     irradiance = None
@@ -78,7 +79,7 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
             albedo[component] = {"present": False}
             continue
         if irradiance is None:  # shadow function of the truth: computed once, for both components
-            irradiance = true_irradiance(mesh, truth)
+            irradiance = true_irradiance(mesh, truth, *(shadow or (None, None)))
         mask = evaluation_mask(truth, irradiance, est.observed, component)
         entry = {"present": True, "evaluated_faces": int(mask.sum())}
         for scale in metrics.SCALES:
@@ -87,7 +88,7 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
                             "median_ratio_rgb": [metrics.ratio_summary(r[:, c])["median_ratio"] for c in range(3)]}
             if scale == "dc":
                 ratios[component] = r
-        s = np.sum(est_albedo[mask] * true_albedo[mask], 0) / np.maximum(np.sum(est_albedo[mask] ** 2, 0), 1e-300)
+        s = metrics.lstsq_scale(est_albedo[mask], true_albedo[mask])
         de = metrics.ciede2000(est_albedo[mask] * s, true_albedo[mask]) if mask.any() else np.zeros(0)
         entry["ciede2000"] = {"mean": float(de.mean()) if de.size else None,
                               "median": float(np.median(de)) if de.size else None,

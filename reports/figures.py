@@ -13,7 +13,7 @@ from estimator import latlong, sh  # noqa: E402
 from estimator.camera import Camera  # noqa: E402
 from estimator.raycast import RayCaster  # noqa: E402
 
-from .metrics import LUMINANCE, tonemap  # noqa: E402
+from .metrics import LUMINANCE, lstsq_scale, tonemap  # noqa: E402
 
 
 def _png(fig) -> bytes:
@@ -38,7 +38,7 @@ def illumination(estimate_sh: np.ndarray, truth_sh: np.ndarray, size=(128, 256))
     fig, axes = plt.subplots(1, 3, figsize=(13, 2.9), gridspec_kw={"width_ratios": [2, 2, 1.3]})
     _show(axes[0], tonemap(tru, exposure), "ground truth, Phong-filtered (unit DC)")
     _show(axes[1], tonemap(est, exposure), "estimated pseudo illumination")
-    order = int(round(np.sqrt(estimate_sh.shape[0]))) - 1
+    order = sh.order_of(estimate_sh.shape[0])
     band = sh.degrees(order)
     for coeffs, label in ((truth_sh, "truth"), (estimate_sh, "estimate")):
         axes[2].semilogy(range(order + 1), [np.sum(coeffs[band == l] ** 2) for l in range(order + 1)], "o-", label=label)
@@ -81,7 +81,7 @@ def texture_maps(caster: RayCaster, estimate: dict[str, np.ndarray], truth: dict
     fig, axes = plt.subplots(len(comps), 2, figsize=(10, 2.6 * len(comps)), squeeze=False)
     for row, comp in zip(axes, comps):
         e, t = estimate[comp], truth[comp]
-        s = np.sum(e * t, 0) / np.maximum(np.sum(e * e, 0), 1e-300)
+        s = lstsq_scale(e, t)
         top = max(float(np.percentile(t, 99.5)), 1e-6)
         for ax, values, title in ((row[0], t, f"true {comp} albedo"), (row[1], e * s, f"estimated {comp} (scaled)")):
             img = np.where(ids[..., None] >= 0, values[np.maximum(ids, 0)], 0.0)
@@ -115,7 +115,7 @@ def image_comparison(names, predictions, references, masks, title: str) -> bytes
     fig, axes = plt.subplots(n, 3, figsize=(8.4, 2.8 * n), squeeze=False)
     for row, name, p, r, m in zip(axes, names, predictions, references, masks):
         exposure = float(np.percentile(r[m], 99)) if m.any() else 1.0
-        s = np.sum(p[m] * r[m], 0) / np.maximum(np.sum(p[m] ** 2, 0), 1e-300) if m.any() else np.ones(3)
+        s = lstsq_scale(p[m], r[m]) if m.any() else np.ones(3)
         _show(row[0], tonemap(r, exposure), f"{name}: reference")
         _show(row[1], tonemap(p * s, exposure), f"{title}")
         diff = np.abs(p * s - r) @ LUMINANCE / exposure

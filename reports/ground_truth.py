@@ -1,30 +1,74 @@
-"""Ground truth brought into the estimate's terms: filtered illumination and which faces count."""
+"""Ground truth of a synthetic dataset, and the truth brought into the estimate's terms:
+filtered illumination, irradiance and which faces count."""
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from estimator import sh
-from estimator.data import GroundTruth, TriangleMesh
+from estimator.config import EstimatorConfig
+from estimator.data import TriangleMesh
 from estimator.raycast import RayCaster
 from estimator.reflection import diffuse_matrix
-from estimator.visibility import compute_visibility, sphere_sampling
+from estimator.visibility import SphereSampling, Visibility, compute_visibility, sphere_sampling
 
 from .metrics import LUMINANCE
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Exactly known truth of a synthetic dataset.
+
+    Attributes
+    ----------
+    diffuse, specular : (F, 3) linear per-face albedo (area average over each face).
+    radiance_sh : (M, 3) SH of the true radiance illumination (not filtered).
+    brdf : dict, e.g. {'model': 'phong', 'exponent': 10.0}.
+    illumination : dict describing the light (lights list, or environment map).
+    regions : (F,) int region of each face, or None.
+    """
+
+    diffuse: np.ndarray
+    specular: np.ndarray
+    radiance_sh: np.ndarray
+    brdf: dict
+    illumination: dict
+    regions: np.ndarray | None = None
+
+    @property
+    def sh_order(self) -> int:
+        return sh.order_of(self.radiance_sh.shape[0])
+
+    def known_light(self) -> dict:
+        """Keyword arguments of the known-illumination oracle: ``known_sh`` (the true pseudo
+        illumination) and ``known_radiance`` (the true radiance SH, unit DC)."""
+        r = self.radiance_sh
+        return {"known_sh": sh.pseudo_illumination(r, self.brdf["exponent"]),
+                "known_radiance": r / np.where(np.abs(r[0]) > 0, r[0], 1.0)}
 
 
 def filtered_illumination(truth: GroundTruth, order: int) -> np.ndarray:
     """The true pseudo illumination: radiance SH x Phong filter (Ramamoorthi & Hanrahan),
     order ``order``, unit DC per channel -- the estimate's gauge. Shape ((order+1)^2, 3)."""
-    return sh.pseudo_illumination(truth.sh, truth.brdf["exponent"], order)
+    return sh.pseudo_illumination(truth.radiance_sh, truth.brdf["exponent"], order)
 
 
-def true_irradiance(mesh: TriangleMesh, truth: GroundTruth, order: int = 10, directions: int = 1164) -> np.ndarray:
+def true_irradiance(mesh: TriangleMesh, truth: GroundTruth, sampling: SphereSampling | None = None,
+                    visibility: Visibility | None = None, order: int | None = None) -> np.ndarray:
     """(F, 3) direct irradiance / pi reaching each face centroid from the true light
-    (its SH to ``order``), with self-shadowing: sum_lm L_lm C_lm."""
-    caster = RayCaster(mesh)
-    sampling = sphere_sampling(directions)
-    c = diffuse_matrix(mesh, sampling, compute_visibility(caster, sampling), order)
-    return c @ truth.sh[: sh.num_coeffs(order)]
+    (its SH to ``order``, default the estimator's), with self-shadowing: sum_lm L_lm C_lm.
+
+    ``sampling`` and ``visibility`` (the shadow function) are computed with the
+    estimator's defaults unless given (a report passes the predictor's own).
+    """
+    defaults = EstimatorConfig()
+    order = defaults.sh_order if order is None else order
+    if sampling is None or visibility is None:
+        sampling = sphere_sampling(defaults.directions)
+        visibility = compute_visibility(RayCaster(mesh), sampling)
+    c = diffuse_matrix(mesh, sampling, visibility, order)
+    return c @ truth.radiance_sh[: sh.num_coeffs(order)]
 
 
 def evaluation_mask(truth: GroundTruth, irradiance: np.ndarray, observed: np.ndarray, component: str,

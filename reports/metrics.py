@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import comb
 
+from estimator import sh
+
 
 def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
     """Adjusted Rand index (Hubert & Arabie 1985) of two labelings (N,); 1 = same partition."""
@@ -24,8 +26,18 @@ def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
     return float((index - expected) / (maximum - expected))
 
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 / sRGB luminance weights (linear RGB)
 SCALES = ("dc", "lstsq")
+
+
+def lstsq_scale(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Per-channel least-squares scale s minimising ||s values - reference||.
+
+    values, reference : (N, C) -> (C,); 1 where ``values`` is all zero in a channel.
+    """
+    v, r = np.asarray(values, float), np.asarray(reference, float)
+    num, den = np.sum(v * r, axis=0), np.sum(v * v, axis=0)
+    return np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
 
 
 def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, scale: str,
@@ -52,8 +64,7 @@ def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, sca
             raise ValueError("scale 'dc' needs the DC coefficient of the true illumination")
         t = t * np.asarray(dc, float)[None]
     elif scale == "lstsq":
-        s = np.sum(e * t, axis=0) / np.maximum(np.sum(e * e, axis=0), 1e-300)
-        e = e * s[None]
+        e = e * lstsq_scale(e, t)[None]
     else:
         raise ValueError(f"scale must be one of {SCALES}, got {scale!r}")
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -78,8 +89,8 @@ def sh_comparison(estimate: np.ndarray, truth: np.ndarray) -> dict:
     e, t = np.asarray(estimate, float), np.asarray(truth, float)
     if e.shape != t.shape:
         raise ValueError(f"SH shapes differ: {e.shape} vs {t.shape}")
-    order = int(round(np.sqrt(e.shape[0]))) - 1
-    band = np.repeat(np.arange(order + 1), 2 * np.arange(order + 1) + 1)
+    order = sh.order_of(e.shape[0])
+    band = sh.degrees(order)
     energy = lambda c: [float(np.sum(c[band == l] ** 2)) for l in range(order + 1)]  # noqa: E731
     err = [float(np.linalg.norm((e - t)[band == l]) / max(np.linalg.norm(t[band == l]), 1e-300))
            for l in range(order + 1)]
@@ -100,9 +111,7 @@ def tonemap(linear: np.ndarray, exposure: float) -> np.ndarray:
 
 def align_scale(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Per-channel least-squares scale of ``prediction`` onto ``reference`` over ``mask`` (H, W)."""
-    p, r = prediction[mask], reference[mask]
-    s = np.sum(p * r, axis=0) / np.maximum(np.sum(p * p, axis=0), 1e-300)
-    return prediction * s[None, None]
+    return prediction * lstsq_scale(prediction[mask], reference[mask])[None, None]
 
 
 def psnr(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
@@ -112,20 +121,15 @@ def psnr(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: 
 
 
 def ssim(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
-    """Mean SSIM (Wang et al. 2004: Gaussian window sigma 1.5, K1 0.01, K2 0.03), per channel,
-    averaged over the masked pixels."""
-    from scipy.ndimage import gaussian_filter
+    """Mean SSIM (Wang et al. 2004: Gaussian window sigma 1.5, K1 0.01, K2 0.03, population
+    covariance) per channel, by scikit-image's ``structural_similarity``; the SSIM map is
+    averaged over the masked pixels (H, W)."""
+    from skimage.metrics import structural_similarity
 
-    c1, c2 = (0.01 * peak) ** 2, (0.03 * peak) ** 2
-    values = []
-    for ch in range(prediction.shape[2]):
-        x, y = prediction[..., ch].astype(np.float64), reference[..., ch].astype(np.float64)
-        blur = lambda a: gaussian_filter(a, 1.5, truncate=3.5)  # noqa: E731
-        mx, my = blur(x), blur(y)
-        sxx, syy, sxy = blur(x * x) - mx * mx, blur(y * y) - my * my, blur(x * y) - mx * my
-        s = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx * mx + my * my + c1) * (sxx + syy + c2))
-        values.append(s[mask])
-    return float(np.mean(values))
+    _, full = structural_similarity(prediction.astype(np.float64), reference.astype(np.float64),
+                                    data_range=peak, channel_axis=2, gaussian_weights=True, sigma=1.5,
+                                    use_sample_covariance=False, full=True)
+    return float(np.mean(full[mask]))
 
 
 def image_metrics(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, align: bool = True) -> dict:

@@ -11,8 +11,8 @@ backend.set_variant()  # picks llvm_ad_rgb here (points DRJIT_LIBLLVM_PATH at li
 
 
 def _generate(tmp_path_factory, scene: str, **overrides):
-    from harness.generate import generate
-    from harness.scene_spec import load_spec, resolve_scene
+    from harness.scene.generate import generate
+    from harness.scene.spec import load_spec, resolve_scene
 
     out = tmp_path_factory.mktemp("datasets") / scene
     spec = load_spec(resolve_scene(scene), profile="tiny", overrides=overrides or None)
@@ -34,13 +34,13 @@ def tiny_sparse(tmp_path_factory) -> str:
 
 @pytest.fixture(scope="session")
 def tiny_earth_data(tiny_earth):
-    from harness.dataset import read_dataset
+    from harness.io.dataset import read_dataset
     return read_dataset(tiny_earth)
 
 
 @pytest.fixture(scope="session")
 def tiny_sparse_data(tiny_sparse):
-    from harness.dataset import read_dataset
+    from harness.io.dataset import read_dataset
     return read_dataset(tiny_sparse)
 
 

@@ -30,11 +30,11 @@ def test_rotating_the_illumination(predictor, tiny_earth_data):
     np.testing.assert_allclose(full_turn, base, atol=1e-4 * base.max())
     turned, _ = predictor.predict(cam, sh.axis_angle_matrix("y", 90.0))
     assert np.abs(turned - base).mean() > 0.05 * base.mean()
-    h = predictor.illumination(sh.axis_angle_matrix("x", 40.0))
-    np.testing.assert_allclose(h[0], predictor.estimate.sh[0])        # rotation keeps the DC
+    h = predictor.light(sh.axis_angle_matrix("x", 40.0))
+    np.testing.assert_allclose(h[0], predictor.estimate.pseudo_sh[0])        # rotation keeps the DC
 
 
 def test_mesh_mismatch_is_refused(predictor):
-    from harness.geometry import icosphere
+    from harness.scene.geometry import icosphere
     with pytest.raises(ValueError, match="faces"):
         Predictor(icosphere(1), predictor.estimate)

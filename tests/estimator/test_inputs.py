@@ -8,7 +8,7 @@ from estimator.data import MultiViewData, TriangleMesh, View
 from estimator.methods import estimate
 from estimator.observations import Observations, gather_observations
 from estimator.raycast import RayCaster
-from harness.geometry import icosphere
+from harness.scene.geometry import icosphere
 
 CAM = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, 16, 12)
 
@@ -63,7 +63,7 @@ def test_median_colour_matches_numpy():
     rng = np.random.default_rng(0)
     face = rng.integers(0, 7, 60)
     rgb = rng.random((60, 3))
-    obs = Observations(face, np.zeros(60, int), rgb, np.ones(60, int), np.zeros((60, 3)), 9, 1)
+    obs = Observations(face, rgb, np.zeros((60, 3)), 9, 1)
     med = obs.median_color()
     for f in range(9):
         if (face == f).any():

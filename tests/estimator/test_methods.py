@@ -8,7 +8,8 @@ import pytest
 
 from estimator import sh
 from estimator.config import EstimatorConfig
-from estimator.methods import REGISTRY, Estimate, Method, estimate, get_method, register_method
+from estimator.data import Estimate
+from estimator.methods import REGISTRY, Method, estimate, get_method, register_method
 from reports.metrics import adjusted_rand_index
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
@@ -30,8 +31,8 @@ def test_earth_per_face_recovers_specular_albedo_and_filtered_light(earth_per_fa
     mask = est.observed & (gt.specular @ LUM > 0.02)
     r = _ratios(est.specular, gt.specular, mask)
     assert np.mean(np.abs(r - 1) < 0.10) >= 0.90      # measured 0.96 at this size
-    truth = sh.pseudo_illumination(gt.sh, 10.0, 10)
-    assert np.linalg.norm(est.sh - truth) / np.linalg.norm(truth) <= 0.05   # measured 0.009
+    truth = sh.pseudo_illumination(gt.radiance_sh, 10.0, 10)
+    assert np.linalg.norm(est.pseudo_sh - truth) / np.linalg.norm(truth) <= 0.05   # measured 0.009
     assert np.all(est.diffuse == 0)
     assert est.info["unobserved_share"] < 0.01
 
@@ -48,7 +49,7 @@ def test_earth_all_views_without_the_cut_is_worse(tiny_earth_data, earth_per_fac
 @pytest.fixture(scope="module")
 def sparse_results(tiny_sparse_data):
     gt = tiny_sparse_data.ground_truth
-    known = sh.pseudo_illumination(gt.sh, 10.0, 10)
+    known = sh.pseudo_illumination(gt.radiance_sh, 10.0, 10)
     return {name: estimate(tiny_sparse_data.data, name, EstimatorConfig(), known_sh=known)
             for name in ("bilinear-clustered", "bilinear-per-face", "known-illumination", "median-color")}
 
@@ -108,8 +109,8 @@ def test_exponent_is_estimated_with_the_lobe_model(tiny_earth_data):
     residuals = {float(k): v for k, v in est.info["exponent_selection"].items()}
     assert all(np.isfinite(v) for v in residuals.values())
     assert est.config.phong_exponent == 10.0 and min(residuals, key=residuals.get) == 10.0  # the truth
-    assert est.radiance_sh is not None and np.allclose(est.sh[0], 1.0)
-    np.testing.assert_allclose(est.sh, est.radiance_sh * sh.expand_per_degree(sh.phong_filter(10, 10.0))[:, None])
+    assert est.radiance_sh is not None and np.allclose(est.pseudo_sh[0], 1.0)
+    np.testing.assert_allclose(est.pseudo_sh, est.radiance_sh * sh.expand_per_degree(sh.phong_filter(10, 10.0))[:, None])
     with pytest.raises(ValueError, match="depends on it"):
         estimate(tiny_earth_data.data, "bilinear-per-face", EstimatorConfig(components="specular", directions=50),
                  exponent_candidates=(5.0, 10.0))

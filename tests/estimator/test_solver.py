@@ -26,8 +26,8 @@ def test_noise_free_bilinear_problem_is_solved_exactly(components):
     rng = np.random.default_rng(3)
     rgb, group, c_rows, d_rows, h, td, ts = _problem(rng, components)
     res = solve_bilinear(rgb, group, c_rows, d_rows, 30, components, iterations=50, tol=1e-14)
-    np.testing.assert_allclose(res.sh[0], 1.0)                      # the gauge
-    np.testing.assert_allclose(res.sh, h, atol=1e-5)
+    np.testing.assert_allclose(res.light[0], 1.0)                      # the gauge
+    np.testing.assert_allclose(res.light, h, atol=1e-5)
     np.testing.assert_allclose(res.diffuse, td, atol=1e-5)
     np.testing.assert_allclose(res.specular, ts, atol=1e-5)
     assert res.residuals[-1] < 1e-6 and res.residuals[-1] <= res.residuals[0]
@@ -36,9 +36,9 @@ def test_noise_free_bilinear_problem_is_solved_exactly(components):
 def test_known_illumination_is_one_linear_solve():
     rng = np.random.default_rng(4)
     rgb, group, c_rows, d_rows, h, td, ts = _problem(rng, "both")
-    res = solve_bilinear(rgb, group, c_rows, d_rows, 30, "both", fixed_sh=h)
+    res = solve_bilinear(rgb, group, c_rows, d_rows, 30, "both", fixed_light=h)
     np.testing.assert_allclose(res.diffuse, td, atol=1e-8)
-    np.testing.assert_allclose(res.sh, h)
+    np.testing.assert_allclose(res.light, h)
     assert len(res.residuals) == 1
 
 

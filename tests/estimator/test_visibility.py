@@ -6,12 +6,12 @@ from estimator.data import TriangleMesh
 from estimator.raycast import RayCaster
 from estimator.reflection import diffuse_matrix, lobe_matrix, mirror_matrix
 from estimator.visibility import compute_visibility, sphere_sampling
-from harness.geometry import blob, icosphere
+from harness.scene.geometry import blob, icosphere
 
 
 def test_paper_sphere_sampling():
     s = sphere_sampling(1164)
-    assert s.directions.shape == (1164, 3) and s.triangles.shape == (2324, 3)
+    assert s.directions.shape == (1164, 3) and s.weights.shape == (1164,)
     assert s.weights.sum() == pytest.approx(4 * np.pi)
     assert s.weights.min() > 0.5 * s.weights.mean() and s.weights.max() < 1.5 * s.weights.mean()
     # the quadrature integrates low-order SH: Y00 -> sqrt(4 pi), others -> 0

@@ -1,6 +1,6 @@
 import os
 
-from harness.cli import main
+from harness.cli.main import main
 
 
 def test_scenes_lists_the_shipped_scenes(capsys):

@@ -6,13 +6,14 @@ import OpenEXR
 import pytest
 
 from estimator.camera import Camera, look_at
-from estimator.data import GroundTruth, TriangleMesh
-from harness import generate as generate_module
-from harness.atomic import OutputExistsError, atomic_directory
-from harness.dataset import DatasetError, read_dataset, write_dataset, write_ground_truth
-from harness.exr import read_exr, write_exr
-from harness.generate import generate
-from harness.scene_spec import load_spec, resolve_scene
+from estimator.data import TriangleMesh
+from reports.ground_truth import GroundTruth
+import harness.scene.generate as generate_module
+from harness.io.atomic import OutputExistsError, atomic_directory
+from harness.io.dataset import DatasetError, read_dataset, write_dataset, write_ground_truth
+from harness.io.exr import read_exr, write_exr
+from harness.scene.generate import generate
+from harness.scene.spec import load_spec, resolve_scene
 
 
 def test_exr_round_trip(tmp_path):

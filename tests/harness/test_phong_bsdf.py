@@ -2,16 +2,16 @@
 import numpy as np
 import pytest
 
-from harness import phong_bsdf
+from harness import plugins
 
-phong_bsdf.register()
+plugins.register_all()
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain  # noqa: E402
 
 
 def _bsdf(td, ts, n):
-    return {"type": phong_bsdf.PLUGIN_NAME, "exponent": n,
+    return {"type": plugins.PHONG, "exponent": n,
             "diffuse_reflectance": {"type": "rgb", "value": td},
             "specular_reflectance": {"type": "rgb", "value": ts}}
 
@@ -28,7 +28,7 @@ def _unit(v):
     (0.6, 0.0, 10.0, [0.2, 0.4, 0.5]),
 ])
 def test_sampling_matches_pdf_chi2(td, ts, n, wi):
-    sample_func, pdf_func = BSDFAdapter(phong_bsdf.PLUGIN_NAME, _bsdf(td, ts, n), wi=_unit(wi))
+    sample_func, pdf_func = BSDFAdapter(plugins.PHONG, _bsdf(td, ts, n), wi=_unit(wi))
     chi2 = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
                          sample_dim=3, sample_count=200000, res=41)
     assert chi2.run(0.01, test_count=4), chi2.messages

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from estimator import latlong, sh
-from harness.images import read_linear_rgb
-from harness.probe import cluster_probe, luminance
+from harness.io.images import read_linear_rgb
+from harness.scene.probe import cluster_probe, luminance
 
 
 @pytest.fixture(scope="module")

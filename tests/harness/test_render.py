@@ -4,9 +4,9 @@ import pytest
 
 from estimator.camera import Camera, look_at
 from estimator.data import TriangleMesh
-from harness.geometry import icosphere
-from harness.illumination import Illumination
-from harness.render import build_scene, render_views
+from harness.scene.geometry import icosphere
+from harness.scene.illumination import Illumination
+from harness.scene.render import build_scene, render_views
 
 
 def _quad(z=0.0, size=1.0):
@@ -84,8 +84,8 @@ def test_diffuse_mirror_bsdf_under_a_constant_environment():
 
 def test_exported_estimate_loads_in_mitsuba(tmp_path):
     from estimator.config import EstimatorConfig
-    from estimator.methods import Estimate
-    from harness.mitsuba_export import export_scene, load_exported_scene
+    from estimator.data import Estimate
+    from harness.scene.export import export_scene, load_exported_scene
 
     import mitsuba as mi
 
@@ -106,7 +106,7 @@ def test_exported_estimate_loads_in_mitsuba(tmp_path):
 def test_sunsky_ground_truth_matches_mitsuba_on_a_white_plane():
     # a white Lambertian plane facing +Y: its radiance is (sky irradiance + sun irradiance cos) / pi
     from estimator import sh
-    from harness.illumination import sunsky_sh
+    from harness.scene.illumination import sunsky_sh
 
     to_sun = np.array([0.5, 0.6, 0.3]) / np.linalg.norm([0.5, 0.6, 0.3])
     light = Illumination("sunsky", sunsky={"to_sun": to_sun.tolist(), "turbidity": 3.0, "ground_albedo": 0.3,

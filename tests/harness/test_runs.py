@@ -3,9 +3,9 @@ import os
 
 import numpy as np
 
-from harness.cli import main
-from harness.exr import read_exr
-from harness.runs import read_run
+from harness.cli.main import main
+from harness.io.exr import read_exr
+from harness.io.runs import read_run
 
 
 def test_estimate_and_render_commands(tiny_earth, tmp_path, capsys):
@@ -18,7 +18,7 @@ def test_estimate_and_render_commands(tiny_earth, tmp_path, capsys):
     assert meta["parameters"]["sh_order"] == 6 and set(meta["timings"]) >= {"observations", "visibility", "solve"}
     assert meta["versions"]["mitsuba"] == "3.9.1" and meta["residuals"][-1] < meta["residuals"][0]
     est, _ = read_run(str(run))
-    assert est.sh.shape == (49, 3) and est.specular.shape == (1280, 3) and est.observed.dtype == bool
+    assert est.pseudo_sh.shape == (49, 3) and est.specular.shape == (1280, 3) and est.observed.dtype == bool
     env = read_exr(run / "illumination.exr")
     assert env.shape == (128, 256, 3) and env.min() >= 0
     # a second run into the same folder is refused; the first stays intact

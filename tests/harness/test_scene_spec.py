@@ -2,7 +2,7 @@ import os
 
 import pytest
 
-from harness.scene_spec import SpecError, load_spec, parse_spec, resolve_scene, shipped_scenes
+from harness.scene.spec import SpecError, load_spec, parse_spec, resolve_scene, shipped_scenes
 
 
 def test_shipped_scenes_load_with_every_profile():
@@ -74,14 +74,14 @@ def test_uv_textures_from_a_mesh_file(tmp_path):
     import numpy as np
     import trimesh
 
-    from harness.generate import prepare
+    from harness.scene.generate import prepare
 
     # a quad whose UVs cover the left half of a texture that is red on the left, blue on the right
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     uv = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 1.0], [0.0, 1.0]]) * [0.98, 1] + [0.01, 0]
     mesh = trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], visual=trimesh.visual.TextureVisuals(uv=uv), process=False)
     mesh.export(tmp_path / "quad.obj")
-    from harness.exr import write_exr
+    from harness.io.exr import write_exr
     tex = np.zeros((4, 8, 3))
     tex[:, :4] = [1.0, 0.0, 0.0]
     tex[:, 4:] = [0.0, 0.0, 1.0]

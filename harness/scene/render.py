@@ -10,9 +10,9 @@ from estimator.data import TriangleMesh
 from estimator.raycast import mitsuba_mesh
 from estimator.sh import axis_angle_matrix, fibonacci_sphere
 
-from . import diffuse_mirror_bsdf, direct_integrator, phong_bsdf
-from .illumination import Illumination
-from .scene_spec import CameraSpec
+from harness import plugins
+from harness.scene.illumination import Illumination
+from harness.scene.spec import CameraSpec
 
 
 def camera_positions(spec: CameraSpec, test: bool = False) -> np.ndarray:
@@ -59,15 +59,13 @@ def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, e
     integrator : 'direct' (deterministic loop over delta lights) or 'path'.
     """
     mi = backend.set_variant()
-    phong_bsdf.register()
-    diffuse_mirror_bsdf.register()
-    direct_integrator.register()
+    plugins.register_all()
     textures = {"diffuse_reflectance": {"type": "mesh_attribute", "name": "face_diffuse"},
                 "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular"}}
     if exponent is None:
-        bsdf = {"type": diffuse_mirror_bsdf.PLUGIN_NAME, **textures}
+        bsdf = {"type": plugins.DIFFUSE_MIRROR, **textures}
     else:
-        bsdf = {"type": phong_bsdf.PLUGIN_NAME, "exponent": float(exponent), **textures}
+        bsdf = {"type": plugins.PHONG, "exponent": float(exponent), **textures}
     props = mi.Properties()
     props["bsdf"] = mi.load_dict(bsdf)
     m = mitsuba_mesh(mesh, "object", props=props)
@@ -76,7 +74,7 @@ def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, e
     if integrator == "direct":
         if not illumination.is_delta:
             raise ValueError("the direct integrator needs delta lights; use 'path' for an envmap")
-        integ = {"type": direct_integrator.PLUGIN_NAME}
+        integ = {"type": plugins.DIRECT}
     else:
         integ = {"type": "path", "max_depth": int(max_depth), "hide_emitters": True}
     scene = {

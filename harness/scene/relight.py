@@ -8,10 +8,10 @@ import numpy as np
 
 from estimator.camera import Camera
 
-from .dataset import Dataset
-from .exr import read_exr
-from .illumination import Illumination
-from .render import build_scene, render_views
+from harness.io.dataset import Dataset
+from harness.io.exr import read_exr
+from harness.scene.illumination import Illumination
+from harness.scene.render import build_scene, render_views
 
 
 def true_illumination(dataset: Dataset) -> Illumination:

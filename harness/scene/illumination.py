@@ -7,9 +7,9 @@ import numpy as np
 
 from estimator import latlong, sh
 
-from .images import read_linear_rgb
-from .probe import cluster_probe
-from .scene_spec import IlluminationSpec
+from harness.io.images import read_linear_rgb
+from harness.scene.probe import cluster_probe
+from harness.scene.spec import IlluminationSpec
 
 
 @dataclass(frozen=True)

@@ -4,13 +4,12 @@ from __future__ import annotations
 import numpy as np
 
 from estimator import latlong
-
-REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+from reports.metrics import LUMINANCE
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """Rec.709 luminance of linear RGB (..., 3) -> (...)."""
-    return np.asarray(rgb, dtype=np.float64) @ REC709_LUMINANCE
+    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE
 
 
 def cluster_probe(image: np.ndarray, count: int = 40, white: bool = False, seed: int = 0,

@@ -12,13 +12,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.camera import Camera
-from estimator.data import GroundTruth, MultiViewData, TriangleMesh, View
+from estimator.data import MultiViewData, TriangleMesh, View
+from reports.ground_truth import GroundTruth
 
-from .exr import read_exr, write_exr
-from .geometry import load_mesh_file, save_mesh_ply
+from harness.io.exr import read_exr, write_exr
+from harness.io.mesh import load_mesh_file, save_mesh_ply
 
 FORMAT_NAME = "pseudolight-dataset"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: ground_truth/illumination_sh.npz names its array radiance_sh (1: sh)
 _INTRINSIC_KEYS = ("w", "h", "fl_x", "fl_y", "cx", "cy")
 
 
@@ -90,7 +91,7 @@ def write_ground_truth(folder: str, truth: GroundTruth, envmap: np.ndarray | Non
     if truth.regions is not None:
         arrays["regions"] = truth.regions.astype(np.int64)
     np.savez(os.path.join(gt, "materials.npz"), **arrays)
-    np.savez(os.path.join(gt, "illumination_sh.npz"), sh=truth.sh, sh_order=truth.sh_order)
+    np.savez(os.path.join(gt, "illumination_sh.npz"), radiance_sh=truth.radiance_sh, sh_order=truth.sh_order)
     if envmap is not None:
         write_exr(os.path.join(gt, "envmap.exr"), envmap)
     with open(os.path.join(gt, "illumination.json"), "w") as f:
@@ -160,7 +161,8 @@ def read_ground_truth(folder: str, num_faces: int) -> GroundTruth | None:
     for key in ("diffuse", "specular"):
         if mats[key].shape != (num_faces, 3):
             raise DatasetError(f"{gt}/materials.npz: {key} has shape {mats[key].shape}, mesh has {num_faces} faces")
-    return GroundTruth(diffuse=mats["diffuse"], specular=mats["specular"], sh=shz["sh"],
+    radiance = shz["radiance_sh"] if "radiance_sh" in shz else shz["sh"]  # format 1 named it sh
+    return GroundTruth(diffuse=mats["diffuse"], specular=mats["specular"], radiance_sh=radiance,
                        brdf=info["brdf"], illumination=info["illumination"],
                        regions=mats["regions"] if "regions" in mats else None)
 

@@ -381,7 +381,7 @@ def load_spec(path: str | os.PathLike, profile: str | None = None,
     return spec
 
 
-SCENES_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+SCENES_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "scenes")
 
 
 def shipped_scenes() -> dict[str, str]:

@@ -7,7 +7,7 @@ import numpy as np
 
 from estimator import backend
 
-from .exr import read_exr
+from harness.io.exr import read_exr
 
 
 def read_linear_rgb(path: str | os.PathLike) -> np.ndarray:

@@ -12,10 +12,10 @@ import numpy as np
 
 from estimator.backend import VARIANTS, BackendError
 
-from .atomic import OutputExistsError
-from .dataset import DatasetError
-from .runs import RunError, estimator_settings, known_light
-from .scene_spec import SCENES_DIR, SpecError, load_spec, resolve_scene, shipped_scenes
+from harness.io.atomic import OutputExistsError
+from harness.io.dataset import DatasetError
+from harness.io.runs import RunError, estimator_settings
+from harness.scene.spec import SCENES_DIR, SpecError, load_spec, resolve_scene, shipped_scenes
 
 DEFAULT_SCENE = "earth-specular"
 USER_ERRORS = (RunError, SpecError, DatasetError, BackendError, OutputExistsError, FileNotFoundError, ValueError)
@@ -50,7 +50,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    from .generate import generate
+    from harness.scene.generate import generate
 
     spec = load_spec(resolve_scene(args.scene), args.profile, _overrides(args))
     summary = generate(spec, args.output, overwrite=args.overwrite, variant=args.variant)
@@ -72,7 +72,7 @@ def _load_baseline(path: str | None) -> dict | None:
 
 
 def _report_exit(metrics: dict, regressions, out: str) -> int:
-    from .reporting import terminal_summary
+    from reports.html import terminal_summary
 
     print(terminal_summary(metrics))
     print(f"report: {os.path.abspath(os.path.join(out, 'report.html'))}")
@@ -91,7 +91,7 @@ def _report_exit(metrics: dict, regressions, out: str) -> int:
 
 
 def cmd_report(args) -> int:
-    from .reporting import build_report
+    from harness.cli.reporting import build_report
 
     metrics, regressions = build_report(args.run, args.output, args.dataset, tuple(args.rotate_illumination),
                                         args.cross_check_spp, not args.no_mitsuba, _load_baseline(args.baseline),
@@ -106,7 +106,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from .reporting import compare_runs, print_table
+    from harness.cli.reporting import compare_runs, print_table
 
     rows = compare_runs(args.runs, args.output, overwrite=args.overwrite)
     print_table(rows)
@@ -115,8 +115,8 @@ def cmd_compare(args) -> int:
 
 
 def cmd_suite(args) -> int:
-    from .reporting import print_table
-    from .suite import load_suite, run_suite
+    from harness.cli.reporting import print_table
+    from harness.cli.suite import load_suite, run_suite
 
     rows = run_suite(load_suite(args.suite), args.output, args.profile, not args.no_mitsuba, args.overwrite,
                      log=lambda m: print(m, file=sys.stderr))
@@ -126,35 +126,20 @@ def cmd_suite(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """Generate the default scene, estimate with its recommended method, report."""
-    from estimator import sh
-    from estimator.methods import estimate
+    """Generate the default scene, estimate with its recommended method, report against its baseline."""
+    from harness.cli.suite import ensure_dataset, run_method
 
-    from .dataset import read_dataset
-    from .generate import generate
-    from .reporting import build_report
-    from .runs import write_run
-
-    spec = load_spec(resolve_scene(DEFAULT_SCENE))
     root = os.path.join(args.output, DEFAULT_SCENE)
-    data_dir, run_dir, report_dir = (os.path.join(root, p) for p in ("dataset", "run", "report"))
+    data_dir = os.path.join(root, "dataset")
     t0 = time.perf_counter()
-    if os.path.exists(data_dir) and not args.overwrite:
-        print(f"reusing dataset {data_dir} (pass --overwrite to render it again)")
-    else:
-        summary = generate(spec, data_dir, overwrite=args.overwrite, variant=args.variant)
-        print(f"generated {DEFAULT_SCENE}: {summary['views']} views in {summary['seconds']['total']:.1f} s")
-    ds = read_dataset(data_dir, load_test=False)
-    method, config = estimator_settings(ds.meta, None, {"variant": args.variant} if args.variant else {})
-    est = estimate(ds.data, method, config)
-    write_run(run_dir, est, data_dir, overwrite=True, extra={"scene": ds.meta.get("scene")})
-    print(f"estimated with {method} ({config.components}) in {est.info['timings']['total']:.1f} s")
+    ensure_dataset(DEFAULT_SCENE, data_dir, overwrite=args.overwrite, variant=args.variant)
     baseline = os.path.join(SCENES_DIR, "baselines", f"{DEFAULT_SCENE}.json")
-    metrics, regressions = build_report(run_dir, report_dir, data_dir, overwrite=True,
-                                        baseline=_load_baseline(baseline) if os.path.isfile(baseline) else None,
-                                        log=lambda m: print(m, file=sys.stderr))
+    _, metrics, regressions = run_method(data_dir, None, os.path.join(root, "run"), os.path.join(root, "report"),
+                                         baseline=_load_baseline(baseline) if os.path.isfile(baseline) else None,
+                                         overrides={"variant": args.variant} if args.variant else None,
+                                         log=lambda m: print(m, file=sys.stderr))
     print(f"total {time.perf_counter() - t0:.1f} s, peak {_peak_rss_mib():.0f} MiB")
-    return _report_exit(metrics, regressions, report_dir)
+    return _report_exit(metrics, regressions, os.path.join(root, "report"))
 
 
 CONFIG_FLAGS = ("components", "sh_order", "directions", "iterations", "min_cos_view", "diffuse_light",
@@ -178,8 +163,8 @@ def _positive_float(flag: str, text: str) -> float:
 def cmd_estimate(args) -> int:
     from estimator.methods import EXPONENT_CANDIDATES, estimate, get_method
 
-    from .dataset import read_dataset
-    from .runs import write_run
+    from harness.io.dataset import read_dataset
+    from harness.io.runs import write_run
 
     ds = read_dataset(args.dataset, load_test=False)
     flags = _config_flags(args)
@@ -194,7 +179,7 @@ def cmd_estimate(args) -> int:
     if get_method(method).needs_illumination:
         if ds.ground_truth is None:
             raise ValueError(f"method {method} needs the true illumination, and {args.dataset} has no ground_truth/")
-        known = known_light(ds.ground_truth)
+        known = ds.ground_truth.known_light()
     est = estimate(ds.data, method, config, **known, log=lambda m: print(f"  {m}", file=sys.stderr),
                    exponent_candidates=candidates)
     est.info["peak_rss_mib"] = _peak_rss_mib()
@@ -213,10 +198,10 @@ def cmd_render(args) -> int:
     from estimator.forward import Predictor
     from estimator.sh import axis_angle_matrix
 
-    from .atomic import atomic_directory
-    from .dataset import read_dataset
-    from .exr import write_exr
-    from .runs import read_run
+    from harness.io.atomic import atomic_directory
+    from harness.io.dataset import read_dataset
+    from harness.io.exr import write_exr
+    from harness.io.runs import read_run
 
     est, run = read_run(args.run)
     ds = read_dataset(args.dataset or run["dataset"])
@@ -239,8 +224,7 @@ def cmd_render(args) -> int:
 
 
 def _add_estimator_flags(p) -> None:
-    from estimator.config import DIFFUSE_LIGHTS, SPECULAR_MODELS
-    from estimator.solver import COMPONENTS
+    from estimator.config import COMPONENTS, DIFFUSE_LIGHTS, SPECULAR_MODELS
 
     p.add_argument("--method", help="registered method (default: the dataset's recommendation, "
                                     "else bilinear-clustered)")

@@ -1,11 +1,11 @@
 """An estimate as a Mitsuba scene: the physically based cross-check of the model.
 
-The estimator predicts R = t_d sum h C + t_s sum h D. With the paper's model
-(``specular_model='mirror'``, ``diffuse_light='pseudo'``) the same image comes
-out of Mitsuba's path tracer (two bounces) when the mesh carries the per-face
-albedos on the diffuse + perfect-mirror BSDF and the pseudo illumination h is
-the environment map. With ``specular_model='lobe'`` the scene uses the Phong
-BSDF and the radiance L = h / (Phong filter) as environment map.
+The estimate's reflection model (:mod:`estimator.models`) names the Mitsuba
+BSDF that renders it: for the paper's model, the diffuse + perfect-mirror BSDF
+lit by the pseudo illumination h; for the lobe model, the Phong BSDF lit by the
+radiance L. The mesh carries the per-face albedos, the environment map is the
+model's light unknown, and Mitsuba's path tracer with two bounces renders the
+image the forward model predicts.
 """
 from __future__ import annotations
 
@@ -15,32 +15,28 @@ import numpy as np
 
 from estimator import sh
 from estimator.camera import Camera, gl_to_mitsuba
-from estimator.data import TriangleMesh
-from estimator.methods import Estimate
+from estimator.data import Estimate, TriangleMesh
+from estimator.models import MitsubaMaterial
 
-from . import diffuse_mirror_bsdf
-from .exr import write_exr
-from .illumination import Illumination
-from .render import build_scene, render_views
+from harness import plugins
+from harness.io.exr import write_exr
+from harness.scene.illumination import Illumination
+from harness.scene.render import build_scene, render_views
+from harness.scene.xml import scene_xml
 
 ENVMAP_SIZE = (256, 512)
+PLUGIN_OF_KIND = {"diffuse_mirror": plugins.DIFFUSE_MIRROR, "phong": plugins.PHONG}
 
 
-def _model(est: Estimate) -> tuple[float | None, np.ndarray]:
-    """(Phong exponent or None for diffuse + mirror, environment SH) of an estimate."""
-    cfg = est.config
-    if cfg.specular_model == "lobe":
-        return cfg.phong_exponent, est.radiance_sh
-    if cfg.diffuse_light != "pseudo":
-        raise ValueError("the Mitsuba cross-check needs one light for both terms: diffuse_light='pseudo' "
-                         "(with specular_model='mirror') or specular_model='lobe'")
-    return None, est.sh
+def _exponent(material: MitsubaMaterial) -> float | None:
+    """The Phong exponent :func:`harness.scene.render.build_scene` takes (None: diffuse + mirror)."""
+    return material.properties["exponent"] if material.kind == "phong" else None
 
 
 def environment(est: Estimate) -> np.ndarray:
-    """The estimate's environment map (H, W, 3) as signed radiance (SH ringing can go negative)."""
-    _, coeffs = _model(est)
-    return sh.to_latlong(coeffs, *ENVMAP_SIZE)
+    """The estimate's environment map (H, W, 3): its light unknown as signed radiance
+    (SH ringing can go negative)."""
+    return sh.to_latlong(est.light, *ENVMAP_SIZE)
 
 
 def render_estimate(mesh: TriangleMesh, est: Estimate, cameras: list[Camera], spp: int = 64,
@@ -51,8 +47,9 @@ def render_estimate(mesh: TriangleMesh, est: Estimate, cameras: list[Camera], sp
     non-negative radiance, so the positive and negative parts of the SH
     environment are rendered separately and subtracted: the result is the
     render of the signed environment, as the forward model sees it.
+    Raises :class:`estimator.models.NoMitsubaEquivalent` for a model without one.
     """
-    exponent, _ = _model(est)
+    exponent = _exponent(est.model.mitsuba_material())
     signed = environment(est)
     total = None
     for sign, part in ((1.0, np.maximum(signed, 0.0)), (-1.0, np.maximum(-signed, 0.0))):
@@ -69,6 +66,29 @@ def render_estimate(mesh: TriangleMesh, est: Estimate, cameras: list[Camera], sp
     return total
 
 
+def scene_dict(est: Estimate, camera: Camera | None = None, spp: int = 64) -> dict:
+    """The exported scene as a Mitsuba scene dictionary (files referenced by name)."""
+    material = est.model.mitsuba_material()
+    bsdf = {"type": PLUGIN_OF_KIND[material.kind], **material.properties,
+            "diffuse_reflectance": {"type": "mesh_attribute", "name": "face_diffuse_color"},
+            "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular_color"}}
+    scene = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 2, "hide_emitters": True},
+        "object": {"type": "ply", "filename": "mesh.ply", "face_normals": True, "bsdf": bsdf},
+        "light": {"type": "envmap", "filename": "envmap.exr"},
+    }
+    if camera is not None:
+        scene["sensor"] = {
+            "type": "perspective", "fov": float(camera.fov_x_deg), "fov_axis": "x",
+            "to_world": gl_to_mitsuba(camera.c2w),
+            "film": {"type": "hdrfilm", "width": int(camera.width), "height": int(camera.height),
+                     "pixel_format": "rgba", "rfilter": {"type": "box"}},
+            "sampler": {"type": "multijitter", "sample_count": int(spp)},
+        }
+    return scene
+
+
 def export_scene(folder: str, mesh: TriangleMesh, est: Estimate, camera: Camera | None = None) -> str:
     """Write ``scene.xml``, ``mesh.ply`` (per-face albedos as face attributes) and
     ``envmap.exr`` into ``folder``; returns the XML path. The environment is
@@ -77,51 +97,19 @@ def export_scene(folder: str, mesh: TriangleMesh, est: Estimate, camera: Camera 
 
     Load with :func:`load_exported_scene`, which registers the pseudolight BSDFs.
     """
-    exponent, _ = _model(est)
-    envmap = np.maximum(environment(est), 0.0)
+    scene = scene_dict(est, camera)
     os.makedirs(folder, exist_ok=True)
-    write_exr(os.path.join(folder, "envmap.exr"), envmap)
+    write_exr(os.path.join(folder, "envmap.exr"), np.maximum(environment(est), 0.0))
     _write_ply(os.path.join(folder, "mesh.ply"), mesh, est.diffuse, est.specular)
-    bsdf_type = "pseudolight_diffuse_mirror" if exponent is None else "pseudolight_phong"
-    exponent_xml = "" if exponent is None else f'\n            <float name="exponent" value="{exponent}"/>'
-    sensor = ""
-    if camera is not None:
-        matrix = " ".join(f"{v:.9g}" for v in gl_to_mitsuba(camera.c2w).ravel())
-        sensor = f"""
-    <sensor type="perspective">
-        <float name="fov" value="{camera.fov_x_deg:.9g}"/>
-        <string name="fov_axis" value="x"/>
-        <transform name="to_world"><matrix value="{matrix}"/></transform>
-        <film type="hdrfilm"><integer name="width" value="{camera.width}"/><integer name="height" value="{camera.height}"/>
-            <string name="pixel_format" value="rgba"/><rfilter type="box"/></film>
-        <sampler type="multijitter"><integer name="sample_count" value="64"/></sampler>
-    </sensor>"""
-    xml = f"""<scene version="3.0.0">
-    <!-- pseudolight estimate ({est.method}); per-face albedos are PLY face attributes -->
-    <integrator type="path"><integer name="max_depth" value="2"/><boolean name="hide_emitters" value="true"/></integrator>
-    <shape type="ply">
-        <string name="filename" value="mesh.ply"/>
-        <boolean name="face_normals" value="true"/>
-        <bsdf type="{bsdf_type}">{exponent_xml}
-            <texture type="mesh_attribute" name="diffuse_reflectance"><string name="name" value="face_diffuse_color"/></texture>
-            <texture type="mesh_attribute" name="specular_reflectance"><string name="name" value="face_specular_color"/></texture>
-        </bsdf>
-    </shape>
-    <emitter type="envmap"><string name="filename" value="envmap.exr"/></emitter>{sensor}
-</scene>
-"""
     path = os.path.join(folder, "scene.xml")
     with open(path, "w") as f:
-        f.write(xml)
+        f.write(scene_xml(scene, f"pseudolight estimate ({est.method}); per-face albedos are PLY face attributes"))
     return path
 
 
 def load_exported_scene(path: str):
     """``mi.load_file`` of an exported scene, with the pseudolight plugins registered."""
-    from . import phong_bsdf
-
-    phong_bsdf.register()
-    diffuse_mirror_bsdf.register()
+    plugins.register_all()
     import mitsuba as mi
 
     return mi.load_file(path)

@@ -9,16 +9,18 @@ import time
 import numpy as np
 
 from estimator import backend
-from estimator.data import GroundTruth, TriangleMesh
+from estimator.data import TriangleMesh
+from reports.ground_truth import GroundTruth
 
-from . import geometry
-from .atomic import atomic_directory
-from .dataset import write_dataset, write_ground_truth
-from .illumination import Illumination, build_illumination
-from .images import read_linear_rgb
-from .render import build_scene, make_cameras, render_views
-from .scene_spec import AlbedoSpec, SceneSpec, SpecError
-from .textures import region_labels, spherical_texture_average, uv_texture_average
+from harness.io.mesh import load_mesh_with_uv
+from harness.scene import geometry
+from harness.io.atomic import atomic_directory
+from harness.io.dataset import write_dataset, write_ground_truth
+from harness.scene.illumination import Illumination, build_illumination
+from harness.io.images import read_linear_rgb
+from harness.scene.render import build_scene, make_cameras, render_views
+from harness.scene.spec import AlbedoSpec, SceneSpec, SpecError
+from harness.scene.textures import region_labels, spherical_texture_average, uv_texture_average
 
 GROUND_TRUTH_SH_ORDER = 12
 
@@ -30,7 +32,7 @@ def build_mesh(spec: SceneSpec) -> tuple[TriangleMesh, np.ndarray | None]:
         return geometry.icosphere(g.subdivisions, g.radius), None
     if g.type == "blob":
         return geometry.blob(g.subdivisions, g.radius, g.lobes, g.depth), None
-    return geometry.load_mesh_with_uv(g.file)
+    return load_mesh_with_uv(g.file)
 
 
 def _albedo(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where: str) -> np.ndarray:

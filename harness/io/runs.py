@@ -11,12 +11,14 @@ import numpy as np
 
 from estimator import sh
 from estimator.config import EstimatorConfig
-from estimator.methods import Estimate
+from estimator.data import Estimate
 
-from .atomic import atomic_directory
-from .exr import write_exr
+from harness.io.atomic import atomic_directory
+from harness.io.exr import write_exr
 
 ILLUMINATION_MAP_SIZE = (128, 256)
+RUN_FORMAT = "pseudolight-run"
+RUN_FORMAT_VERSION = 2  # 2: estimate.npz names the pseudo illumination pseudo_sh (1: sh)
 
 
 class RunError(ValueError):
@@ -31,13 +33,6 @@ def estimator_settings(meta: dict, method: str | None = None, overrides: dict | 
     default_method = chosen.pop("method", None) or "bilinear-clustered"
     chosen.update(overrides or {})
     return method or default_method, EstimatorConfig(**chosen)
-
-
-def known_light(truth) -> dict:
-    """Keyword arguments ``known_sh`` (the true pseudo illumination) and ``known_radiance``
-    (the true radiance SH, unit DC) for the known-illumination oracle."""
-    radiance = truth.sh / np.where(np.abs(truth.sh[0]) > 0, truth.sh[0], 1.0)
-    return {"known_sh": sh.pseudo_illumination(truth.sh, truth.brdf["exponent"]), "known_radiance": radiance}
 
 
 def versions() -> dict:
@@ -60,11 +55,13 @@ def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False,
     """
     with atomic_directory(folder, overwrite=overwrite) as tmp:
         extra_arrays = {} if est.radiance_sh is None else {"radiance_sh": est.radiance_sh}
-        np.savez(os.path.join(tmp, "estimate.npz"), diffuse=est.diffuse, specular=est.specular, sh=est.sh,
+        np.savez(os.path.join(tmp, "estimate.npz"), diffuse=est.diffuse, specular=est.specular, pseudo_sh=est.pseudo_sh,
                  sh_order=est.sh_order, labels=est.labels, observed=est.observed, **extra_arrays)
-        image = sh.to_latlong(est.sh, *ILLUMINATION_MAP_SIZE)
+        image = sh.to_latlong(est.pseudo_sh, *ILLUMINATION_MAP_SIZE)
         write_exr(os.path.join(tmp, "illumination.exr"), np.maximum(image, 0.0))
         run = {
+            "format": RUN_FORMAT,
+            "format_version": RUN_FORMAT_VERSION,
             "method": est.method,
             "parameters": est.config.to_dict(),
             "dataset": os.path.abspath(dataset),
@@ -92,7 +89,8 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
     data = np.load(npz)
     known = {f.name for f in dataclasses.fields(EstimatorConfig)}
     config = EstimatorConfig(**{k: v for k, v in run["parameters"].items() if k in known})
-    est = Estimate(data["diffuse"], data["specular"], data["sh"], data["labels"], data["observed"].astype(bool),
+    pseudo = data["pseudo_sh"] if "pseudo_sh" in data else data["sh"]  # run format 1 named it sh
+    est = Estimate(data["diffuse"], data["specular"], pseudo, data["labels"], data["observed"].astype(bool),
                    run["method"], config, {k: run[k] for k in ("timings",) if k in run},
                    data["radiance_sh"] if "radiance_sh" in data else None)
     return est, run

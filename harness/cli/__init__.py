@@ -1,0 +1,4 @@
+"""The ``pseudolight`` command line and the benchmark runner."""
+from harness.cli.main import main
+
+__all__ = ["main"]

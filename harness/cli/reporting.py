@@ -1,0 +1,113 @@
+"""`pseudolight report` and `pseudolight compare`: reading runs and datasets, the Mitsuba
+renders a report needs (ground truth under turned light, the estimate re-rendered),
+and writing the report and comparison folders atomically. The content (metrics,
+figures, columns) is :mod:`reports.report`'s."""
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+
+from estimator.forward import Predictor
+from estimator.models import NoMitsubaEquivalent
+from estimator.sh import axis_angle_matrix
+from reports.html import compare_page, report_page
+from reports.regression import check
+from reports.report import COMPARE_COLUMNS, Renders, assemble, compare_figures, compare_row, text_table
+
+from harness.io.atomic import atomic_directory
+from harness.io.dataset import read_dataset
+from harness.io.runs import RunError, read_run, versions
+from harness.scene.export import export_scene, render_estimate
+from harness.scene.relight import render_truth
+
+
+def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rotation=("y", 90.0),
+                 cross_check_spp: int | None = None, mitsuba: bool = True, baseline: dict | None = None,
+                 overwrite: bool = False, log=print) -> tuple[dict, list[dict] | None]:
+    """Evaluate a run against its dataset's ground truth and write the report folder.
+
+    ``cross_check_spp`` defaults to 64 (512 for a radiance model, whose Phong-lobe
+    render of the radiance environment is noisier).
+
+    Returns (metrics, regression rows or None).
+    """
+    t0 = time.perf_counter()
+    est, run = read_run(run_dir)
+    ds = read_dataset(dataset_dir or run["dataset"])
+    if ds.ground_truth is None:
+        raise ValueError(f"{ds.path} has no ground_truth/: a report compares with ground truth")
+    if ds.data.mesh.num_faces != est.diffuse.shape[0]:
+        raise ValueError(f"the run has {est.diffuse.shape[0]} faces, the dataset's mesh {ds.data.mesh.num_faces}")
+    mesh = ds.data.mesh
+    predictor = Predictor(mesh, est)
+    views = ds.data.test_views or ds.data.views[:2]
+    view_note = "" if ds.data.test_views else "the dataset has no test_frames: training views 0-1 used"
+    cams = [v.camera for v in views]
+
+    log(f"rendering the ground truth with the light turned {rotation[1]} deg about {rotation[0]}")
+    renders = Renders(rotation, render_truth(ds, cams, axis_angle_matrix(rotation[0], float(rotation[1]))))
+    if mitsuba:
+        spp = cross_check_spp or (512 if est.model.light == "radiance" else 64)
+        try:
+            log(f"rendering the estimate through Mitsuba ({spp} spp)")
+            renders.estimate = render_estimate(mesh, est, cams, spp)
+        except NoMitsubaEquivalent as exc:
+            renders.estimate_note = f"skipped: {exc}"
+
+    header = {"scene": ds.meta.get("scene", os.path.basename(ds.path)), "dataset": ds.path,
+              "run": os.path.abspath(run_dir), "versions": versions(), "estimate_timings": run.get("timings")}
+    content = assemble(predictor, ds.ground_truth, views, renders, header, view_note)
+    m = content.metrics
+    regressions = check(m, baseline) if baseline is not None else None
+    m["report_seconds"] = time.perf_counter() - t0
+
+    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+        with open(os.path.join(tmp, "metrics.json"), "w") as f:
+            json.dump(m, f, indent=1)
+        np.savez(os.path.join(tmp, "ratios.npz"), **content.ratios)
+        for index, (section, _, png) in enumerate(content.figures):
+            with open(os.path.join(tmp, f"fig{index:02d}_{section.lower().replace(' ', '_')}.png"), "wb") as f:
+                f.write(png)
+        with open(os.path.join(tmp, "report.html"), "w") as f:
+            f.write(report_page(m, content.figures, regressions))
+        try:
+            export_scene(os.path.join(tmp, "mitsuba"), mesh, est, cams[0])
+        except NoMitsubaEquivalent:
+            pass  # the estimate's model has no single-environment Mitsuba equivalent (see metrics)
+    return m, regressions
+
+
+def find_metrics(folder: str) -> str:
+    """metrics.json of a report folder, or of RUN/report."""
+    for candidate in (os.path.join(folder, "metrics.json"), os.path.join(folder, "report", "metrics.json")):
+        if os.path.isfile(candidate):
+            return candidate
+    raise RunError(f"{folder} has no metrics.json (nor report/metrics.json): run `pseudolight report` first")
+
+
+def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False) -> list[dict]:
+    """compare.json + compare.html over several reports (methods x scenes)."""
+    entries, rows = [], []
+    for folder in folders:
+        path = find_metrics(folder)
+        with open(path) as f:
+            metrics = json.load(f)
+        ratios = dict(np.load(os.path.join(os.path.dirname(path), "ratios.npz")))
+        entries.append((metrics, ratios))
+        rows.append(compare_row(metrics, ratios, os.path.abspath(folder)))
+    figs = compare_figures(entries)
+    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+        with open(os.path.join(tmp, "compare.json"), "w") as f:
+            json.dump({"columns": COMPARE_COLUMNS, "rows": rows}, f, indent=1)
+        with open(os.path.join(tmp, "compare.html"), "w") as f:
+            f.write(compare_page(rows, COMPARE_COLUMNS, figs))
+    return rows
+
+
+def print_table(rows: list[dict], log=print) -> None:
+    """The comparison as a plain-text table."""
+    for line in text_table(rows):
+        log(line)

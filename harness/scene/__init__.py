@@ -1,0 +1,1 @@
+"""Scene specs -> Mitsuba scenes -> rendered datasets; the estimate as a Mitsuba scene."""

@@ -1,0 +1,166 @@
+"""A report's content: the image sets, the metrics and the figures of one estimate
+against one synthetic dataset's ground truth, and the columns of a comparison.
+
+Everything here works on in-memory arrays; reading runs and datasets, the
+Mitsuba renders (the truth under turned light, the estimate re-rendered) and
+writing the report folder are the harness's (``harness.cli.reporting``).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimator.data import Estimate, View
+from estimator.forward import Predictor
+from estimator.sh import axis_angle_matrix
+
+from . import figures
+from .evaluate import ImageSet, evaluate
+from .ground_truth import GroundTruth
+from .html import lookup
+
+# relative L2 on pixels covered by one face, at the default 64 spp: measured 0.003 (earth-specular)
+# and 0.022 (sparse-colored, Monte Carlo noise of the two signed envmap renders; 0.012 at 256 spp)
+CROSS_CHECK_TOLERANCE = 0.03
+
+
+@dataclass
+class Renders:
+    """Images rendered by Mitsuba for a report (RGBA (H, W, 4) per test view).
+
+    relit : the ground-truth scene with its light turned by ``rotation``.
+    estimate : the estimate's Mitsuba scene (None when skipped; ``estimate_note`` says why).
+    """
+
+    rotation: tuple[str, float]
+    relit: list[np.ndarray]
+    estimate: list[np.ndarray] | None = None
+    estimate_note: str = ""
+
+
+@dataclass
+class ReportContent:
+    """What a report folder holds: metrics.json, ratios.npz and the figures."""
+
+    metrics: dict
+    ratios: dict
+    figures: list[tuple[str, str, bytes]] = field(default_factory=list)
+
+
+def view_names(views: list[View]) -> list[str]:
+    """Short names of views: their image file names without folder and extension."""
+    return [os.path.splitext(os.path.basename(v.name))[0] for v in views]
+
+
+def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], renders: Renders,
+             header: dict, view_note: str = "") -> ReportContent:
+    """Compare an estimate (through its ``predictor``) with the ground truth.
+
+    Images are compared on the object pixels whose face the estimate covers
+    (coverage of at least the estimator's ``min_coverage``); the share of object
+    pixels left unestimated is reported beside. ``header`` (scene, method, paths,
+    versions) opens the metrics.
+    """
+    est: Estimate = predictor.estimate
+    mesh = predictor.mesh
+    min_coverage = est.config.min_coverage
+    cams = [v.camera for v in views]
+    names = view_names(views)
+    preds = [predictor.predict(c)[0] for c in cams]
+    estimated = [(ids >= 0) & est.observed[np.maximum(ids, 0)] for ids in predictor.caster.face_id_buffers(cams)]
+    obj = [(v.alpha if v.alpha is not None else np.ones(v.rgb.shape[:2])) >= min_coverage for v in views]
+    unestimated = float(np.mean([1 - (o & e).sum() / max(o.sum(), 1) for o, e in zip(obj, estimated)]))
+    novel = ImageSet(names, preds, [v.rgb for v in views], [m & e for m, e in zip(obj, estimated)], note=view_note)
+
+    axis, degrees = renders.rotation
+    rot = axis_angle_matrix(axis, float(degrees))
+    relit = ImageSet(names, [predictor.predict(c, rot)[0] for c in cams], [t[..., :3] for t in renders.relit],
+                     [(t[..., 3] >= min_coverage) & e for t, e in zip(renders.relit, estimated)],
+                     note=f"light turned {degrees} deg about {axis}")
+    cross = None
+    if renders.estimate is not None:
+        pure = predictor.caster.face_id_buffers(cams, pure=True)
+        cross = ImageSet(names, [r[..., :3] for r in renders.estimate], preds,
+                         [(pu >= 0) & (r[..., 3] >= min_coverage) for pu, r in zip(pure, renders.estimate)],
+                         align=False, note="Mitsuba path tracer (2 bounces) vs the estimator's forward model, "
+                                           "on pixels covered by one face alone")
+    elif renders.estimate_note:
+        cross = ImageSet([], [], [], [], note=renders.estimate_note)
+
+    ev = evaluate(mesh, truth, est, novel, relit, cross, CROSS_CHECK_TOLERANCE,
+                  shadow=(predictor.sampling, predictor.visibility))
+    m = {"schema": ev.metrics.pop("schema"), "schema_version": ev.metrics.pop("schema_version"), **header,
+         "method": est.method, "parameters": est.config.to_dict(), **ev.metrics}
+    for key in ("novel_views", "relighting"):
+        if m.get(key):
+            m[key]["unestimated_pixel_share"] = unestimated
+
+    figs = [("Pseudo illumination", "estimated vs Phong-filtered ground truth (shared exposure)",
+             figures.illumination(est.pseudo_sh, ev.filtered_truth_sh)),
+            ("Albedo", "estimated / true albedo per face (the paper's Fig. 5e)", figures.ratio_histograms(ev.ratios))]
+    present = {c: getattr(est, c) for c in ("specular", "diffuse") if lookup(m, f"albedo.{c}.present")}
+    if present:
+        figs.append(("Albedo", "texture maps: lat-long projection from the mesh centre",
+                     figures.texture_maps(predictor.caster, present, {c: getattr(truth, c) for c in present})))
+    figs.append(("Clusters", "faces coloured by cluster (grey: seen, not estimated)",
+                 figures.clusters(predictor.caster, cams[:3], est.labels, truth.regions)))
+    for key, images, caption in (("Novel views", novel, "prediction (scaled per channel)"),
+                                 ("Relighting", relit, "prediction, light rotated (scaled)"),
+                                 ("Mitsuba cross-check", cross, "Mitsuba render of the estimate")):
+        if images is not None and images.names:
+            figs.append((key, images.note or key, figures.image_comparison(
+                images.names[:3], images.predictions[:3], images.references[:3], images.masks[:3], caption)))
+    return ReportContent(m, ev.ratios, figs)
+
+
+COMPARE_COLUMNS = [
+    ("scene", "scene"), ("method", "method"), ("components", "components"),
+    ("SH rel. L2", "illumination.relative_l2"),
+    ("spec ±10 % (DC)", "albedo.specular.dc.luminance.within_10"),
+    ("spec median", "albedo.specular.dc.luminance.median_ratio"),
+    ("spec ±10 % (lstsq)", "albedo.specular.lstsq.luminance.within_10"),
+    ("diff ±10 % (DC)", "albedo.diffuse.dc.luminance.within_10"),
+    ("diff ±10 % (lstsq)", "albedo.diffuse.lstsq.luminance.within_10"),
+    ("diff median |err| (lstsq)", "diffuse_median_abs_error"),
+    ("ARI", "clusters.ari"), ("clusters", "clusters.clusters"),
+    ("novel PSNR sRGB", "novel_views.psnr_srgb"), ("relit PSNR sRGB", "relighting.psnr_srgb"),
+]
+
+
+def compare_row(metrics: dict, ratios: dict, folder: str) -> dict:
+    """One row of the comparison table from a report's metrics and its DC-gauge ratios
+    (component -> (n, 4) array, luminance in column 3)."""
+    row = {"folder": folder, "scene": metrics.get("scene"), "method": metrics.get("method"),
+           "components": (metrics.get("parameters") or {}).get("components")}
+    for _, key in COMPARE_COLUMNS[3:]:
+        if key != "diffuse_median_abs_error":
+            row[key] = lookup(metrics, key)
+    row["diffuse_median_abs_error"] = None
+    if "diffuse" in ratios:
+        lum = ratios["diffuse"][:, 3]
+        lum = lum[np.isfinite(lum)]
+        if lum.size:
+            row["diffuse_median_abs_error"] = float(np.median(np.abs(lum / np.median(lum) - 1)))
+    return row
+
+
+def compare_figures(entries: list[tuple[dict, dict]]) -> list[tuple[str, bytes]]:
+    """Overlaid ratio histograms per (scene, component) over (metrics, ratios) pairs."""
+    hist: dict = {}
+    for metrics, ratios in entries:
+        for comp, r in ratios.items():
+            hist.setdefault((metrics.get("scene"), comp), []).append((metrics.get("method"), r[:, 3]))
+    return [(f"{scene}: {comp} albedo ratios", figures.compare_histograms(runs, comp))
+            for (scene, comp), runs in sorted(hist.items(), key=lambda kv: str(kv[0]))]
+
+
+def text_table(rows: list[dict]) -> list[str]:
+    """The comparison as plain-text lines, one per row plus the header."""
+    cols = COMPARE_COLUMNS
+    cells = [[label for label, _ in cols]] + [
+        ["-" if r.get(k) is None else (f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k])) for _, k in cols]
+        for r in rows]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(cols))]
+    return ["  ".join(c.ljust(w) for c, w in zip(row, widths)) for row in cells]

@@ -1,0 +1,62 @@
+"""Reflection models: selection from the configuration, rows, light conversion, Mitsuba material."""
+import numpy as np
+import pytest
+
+from estimator import sh
+from estimator.config import EstimatorConfig
+from estimator.models import (MODELS, DefilteredModel, LobeModel, NoMitsubaEquivalent, PaperModel,
+                              reflection_model)
+from estimator.raycast import RayCaster
+from estimator.reflection import mirror_directions
+from estimator.visibility import compute_visibility, sphere_sampling
+from harness.scene.geometry import icosphere
+
+
+@pytest.mark.parametrize("flags, cls", [
+    ({}, PaperModel),
+    ({"diffuse_light": "defiltered"}, DefilteredModel),
+    ({"specular_model": "lobe"}, LobeModel),
+    ({"specular_model": "lobe", "diffuse_light": "defiltered"}, LobeModel),
+])
+def test_configuration_selects_the_model(flags, cls):
+    model = reflection_model(EstimatorConfig(sh_order=4, **flags))
+    assert type(model) is cls and MODELS[model.name] is cls
+
+
+def test_light_conversion_and_mitsuba_materials():
+    cfg = EstimatorConfig(sh_order=4, phong_exponent=7.0)
+    light = np.random.default_rng(0).standard_normal((25, 3))
+    assert np.array_equal(PaperModel(cfg).pseudo_from_light(light), light)
+    filt = sh.expand_per_degree(sh.phong_filter(4, 7.0))[:, None]
+    np.testing.assert_allclose(LobeModel(cfg).pseudo_from_light(light), light * filt)
+    assert PaperModel(cfg).mitsuba_material().kind == "diffuse_mirror"
+    lobe = LobeModel(cfg).mitsuba_material()
+    assert lobe.kind == "phong" and lobe.properties == {"exponent": 7.0}
+    with pytest.raises(NoMitsubaEquivalent, match="defiltered"):
+        DefilteredModel(cfg).mitsuba_material()
+    assert LobeModel(cfg).known_light("h", "L")[0] == "L" and PaperModel(cfg).known_light("h", "L")[0] == "h"
+
+
+def test_rows_of_the_three_models_agree_where_they_should():
+    # an unshadowed convex sphere: the paper's and the lobe model's diffuse rows are identical,
+    # the defiltered model's differ by 1 / Phong filter in degrees <= defilter_order only
+    mesh = icosphere(1)
+    sampling = sphere_sampling(400)
+    vis = compute_visibility(RayCaster(mesh), sampling)
+    cfg = EstimatorConfig(sh_order=4, directions=400, diffuse_light="defiltered", defilter_order=2)
+    c_paper = PaperModel(cfg).diffuse_matrix(mesh, sampling, vis)
+    np.testing.assert_array_equal(LobeModel(cfg).diffuse_matrix(mesh, sampling, vis), c_paper)
+    gains = DefilteredModel(cfg).diffuse_matrix(mesh, sampling, vis) / np.where(c_paper == 0, 1, c_paper)
+    filt = sh.phong_filter(4, cfg.phong_exponent)
+    band = sh.degrees(4)
+    big = np.abs(c_paper) > 1e-9
+    np.testing.assert_allclose(gains[big & (band[None] <= 2)], (1 / filt[band])[None].repeat(len(c_paper), 0)[big & (band[None] <= 2)])
+    np.testing.assert_allclose(gains[big & (band[None] > 2)], 1.0)
+    # predict is the bilinear form
+    faces = np.arange(5)
+    view = mesh.face_normals[faces]
+    d_rows = PaperModel(cfg).specular_rows(faces, mirror_directions(mesh.face_normals[faces], view), sampling, vis)
+    light = np.random.default_rng(1).standard_normal((25, 3))
+    td, ts = np.full((5, 3), 0.3), np.full((5, 3), 0.2)
+    np.testing.assert_allclose(PaperModel.predict(td, ts, c_paper[faces], d_rows, light),
+                               td * (c_paper[faces] @ light) + ts * (d_rows @ light))
