@@ -13,6 +13,8 @@ import glob
 import os
 import re
 
+from .errors import InputError
+
 MIN_LLVM = 16
 VARIANTS = ("cuda_ad_rgb", "llvm_ad_rgb")
 _LLVM_GLOBS = (
@@ -25,7 +27,7 @@ _LLVM_GLOBS = (
 _chosen: str | None = None
 
 
-class BackendError(RuntimeError):
+class BackendError(InputError):
     """No usable Dr.Jit backend for the requested variant."""
 
 

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import InputError
+
 _GL_FROM_MITSUBA = np.diag([-1.0, 1.0, -1.0, 1.0])
 _CV_FROM_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 
@@ -82,10 +84,21 @@ class Camera:
 
     def __post_init__(self):
         c2w = np.asarray(self.c2w, dtype=np.float64)
-        if c2w.shape != (4, 4) or not np.all(np.isfinite(c2w)):
-            raise ValueError(f"camera c2w must be a finite 4x4 matrix, got shape {c2w.shape}")
+        if c2w.shape != (4, 4):
+            raise InputError(f"camera c2w must be a 4x4 matrix, got shape {c2w.shape}")
+        if not np.all(np.isfinite(c2w)):
+            raise InputError("camera c2w contains NaN or Inf")
+        rot = c2w[:3, :3]
+        if not np.allclose(c2w[3], [0, 0, 0, 1]) or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-3) \
+                or np.linalg.det(rot) < 0:
+            raise InputError("camera c2w is not a rigid camera-to-world transform (its rotation part must be "
+                             "orthonormal with determinant +1 and its last row 0 0 0 1)")
+        values = (self.fx, self.fy, self.cx, self.cy, self.width, self.height)
+        if not all(np.isfinite(v) for v in values):
+            raise InputError(f"camera intrinsics must be finite, got fx={self.fx}, fy={self.fy}, "
+                             f"cx={self.cx}, cy={self.cy}, w={self.width}, h={self.height}")
         if min(self.width, self.height) < 1 or min(self.fx, self.fy) <= 0:
-            raise ValueError(f"camera needs positive size and focal length, got "
+            raise InputError(f"camera needs positive size and focal length, got "
                              f"{self.width}x{self.height}, fx={self.fx}, fy={self.fy}")
         object.__setattr__(self, "c2w", c2w)
 
@@ -93,7 +106,7 @@ class Camera:
     def from_fov(cls, c2w: np.ndarray, fov_x_deg: float, width: int, height: int) -> "Camera":
         """Square-pixel camera with the principal point at the image centre."""
         if not 0.0 < fov_x_deg < 180.0:
-            raise ValueError(f"fov_x must lie in (0, 180) degrees, got {fov_x_deg}")
+            raise InputError(f"fov_x must lie in (0, 180) degrees, got {fov_x_deg}")
         f = 0.5 * width / np.tan(0.5 * np.radians(fov_x_deg))
         return cls(c2w, f, f, 0.5 * width, 0.5 * height, int(width), int(height))
 

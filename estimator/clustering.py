@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import InputError
+
 
 def _histogram_seeds(points: np.ndarray, bins: int) -> np.ndarray:
     """Centres of the non-empty cells of a bins^3 histogram of ``points`` (N, 3)."""
@@ -47,10 +49,10 @@ def mean_shift(points: np.ndarray, bandwidth: float, metric: str = "angular", bi
     peaks : (P, 3) the modes found, merged when closer than ``bandwidth``.
     """
     if bandwidth <= 0:
-        raise ValueError(f"mean-shift bandwidth must be > 0, got {bandwidth}")
+        raise InputError(f"mean-shift bandwidth must be > 0, got {bandwidth}")
     x = np.asarray(points, dtype=np.float64)
     if x.ndim != 2 or len(x) == 0:
-        raise ValueError(f"mean shift needs a non-empty (N, D) array, got {x.shape}")
+        raise InputError(f"mean shift needs a non-empty (N, D) array, got {x.shape}")
     angular = metric == "angular"
     if angular:
         x = x / np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-300)

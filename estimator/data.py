@@ -13,6 +13,7 @@ import numpy as np
 from . import sh
 from .camera import Camera
 from .config import EstimatorConfig
+from .errors import InputError
 
 if TYPE_CHECKING:
     from .models import ReflectionModel
@@ -35,15 +36,18 @@ class TriangleMesh:
         v = np.ascontiguousarray(self.vertices, dtype=np.float64)
         f = np.asarray(self.faces)
         if v.ndim != 2 or v.shape[1] != 3 or v.shape[0] == 0:
-            raise ValueError(f"mesh vertices must have shape (V, 3) with V > 0, got {v.shape}")
+            raise InputError(f"mesh vertices must have shape (V, 3) with V > 0, got {v.shape}")
         if f.ndim != 2 or f.shape[0] == 0:
-            raise ValueError(f"mesh has no faces (faces shape {f.shape})")
+            raise InputError(f"mesh has no faces (faces shape {f.shape})")
         if f.shape[1] != 3:
-            raise ValueError(f"mesh must be made of triangles, got faces with {f.shape[1]} vertices")
+            raise InputError(f"mesh must be made of triangles, got faces with {f.shape[1]} vertices")
         if not np.issubdtype(f.dtype, np.integer) or f.min() < 0 or f.max() >= v.shape[0]:
-            raise ValueError("mesh face indices must be integers in [0, V)")
+            raise InputError("mesh face indices must be integers in [0, V)")
         if not np.all(np.isfinite(v)):
-            raise ValueError("mesh vertices contain NaN or Inf")
+            raise InputError("mesh vertices contain NaN or Inf")
+        c = v[f]
+        if not np.any(np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1) > 0):
+            raise InputError(f"mesh has no face with non-zero area ({f.shape[0]} degenerate faces)")
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", np.ascontiguousarray(f, dtype=np.int64))
 
@@ -97,17 +101,17 @@ class View:
         rgb = np.asarray(self.rgb, dtype=np.float32)
         cam = self.camera
         if rgb.ndim != 3 or rgb.shape[2] != 3:
-            raise ValueError(f"view {self.name}: image must be (H, W, 3), got {rgb.shape}")
+            raise InputError(f"view {self.name}: image must be (H, W, 3), got {rgb.shape}")
         if rgb.shape[:2] != (cam.height, cam.width):
-            raise ValueError(f"view {self.name}: image is {rgb.shape[1]}x{rgb.shape[0]} but the "
+            raise InputError(f"view {self.name}: image is {rgb.shape[1]}x{rgb.shape[0]} but the "
                              f"intrinsics say {cam.width}x{cam.height}")
         if not np.all(np.isfinite(rgb)):
-            raise ValueError(f"view {self.name}: image contains NaN or Inf pixels")
+            raise InputError(f"view {self.name}: image contains NaN or Inf pixels")
         object.__setattr__(self, "rgb", rgb)
         if self.alpha is not None:
             alpha = np.asarray(self.alpha, dtype=np.float32)
             if alpha.shape != rgb.shape[:2]:
-                raise ValueError(f"view {self.name}: alpha shape {alpha.shape} != image {rgb.shape[:2]}")
+                raise InputError(f"view {self.name}: alpha shape {alpha.shape} != image {rgb.shape[:2]}")
             object.__setattr__(self, "alpha", alpha)
 
 
@@ -121,7 +125,7 @@ class MultiViewData:
 
     def __post_init__(self):
         if len(self.views) == 0:
-            raise ValueError("the dataset has no frames (training views)")
+            raise InputError("the dataset has no frames (training views)")
 
 
 @dataclass

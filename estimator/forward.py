@@ -9,6 +9,7 @@ from .data import Estimate, TriangleMesh
 from .raycast import RayCaster
 from .reflection import mirror_directions
 from .visibility import compute_visibility, sphere_sampling
+from .errors import InputError
 
 
 class Predictor:
@@ -26,7 +27,7 @@ class Predictor:
 
     def __init__(self, mesh: TriangleMesh, estimate: Estimate):
         if estimate.diffuse.shape[0] != mesh.num_faces:
-            raise ValueError(f"the estimate has {estimate.diffuse.shape[0]} faces, the mesh {mesh.num_faces}")
+            raise InputError(f"the estimate has {estimate.diffuse.shape[0]} faces, the mesh {mesh.num_faces}")
         self.mesh, self.estimate, self.model = mesh, estimate, estimate.model
         self.caster = RayCaster(mesh, estimate.config.variant)
         self.sampling = sphere_sampling(estimate.config.directions)

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import InputError
+
 
 def directions(height: int, width: int) -> np.ndarray:
     """Unit directions of every pixel, shape (H, W, 3)."""
     if height < 3 or width < 2:
-        raise ValueError(f"a lat-long map needs at least 3 rows and 2 columns, got {height}x{width}")
+        raise InputError(f"a lat-long map needs at least 3 rows and 2 columns, got {height}x{width}")
     theta = np.pi * np.arange(height) / (height - 1)
     phi = 2.0 * np.pi * np.arange(width) / width
     st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]

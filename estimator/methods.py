@@ -16,6 +16,7 @@ from .data import Estimate, MultiViewData
 from .models import reflection_model
 from .pipeline import Prepared, prepare, with_config
 from .solver import BilinearResult, solve_bilinear
+from .errors import InputError
 
 
 REGISTRY: dict[str, type["Method"]] = {}
@@ -24,14 +25,14 @@ REGISTRY: dict[str, type["Method"]] = {}
 def register_method(cls: type["Method"]) -> type["Method"]:
     """Class decorator: make a method available under ``cls.name``."""
     if not getattr(cls, "name", None):
-        raise ValueError(f"{cls.__name__} needs a 'name'")
+        raise InputError(f"{cls.__name__} needs a 'name'")
     REGISTRY[cls.name] = cls
     return cls
 
 
 def get_method(name: str) -> type["Method"]:
     if name not in REGISTRY:
-        raise ValueError(f"unknown method {name!r}; registered: {', '.join(sorted(REGISTRY))}")
+        raise InputError(f"unknown method {name!r}; registered: {', '.join(sorted(REGISTRY))}")
     return REGISTRY[name]
 
 
@@ -100,7 +101,7 @@ class KnownIllumination(Method):
     def solve(self, prep):
         known, what = self.model.known_light(self.known_sh, self.known_radiance)
         if known is None:
-            raise ValueError(f"known-illumination needs {what} for the {self.model.name!r} reflection model")
+            raise InputError(f"known-illumination needs {what} for the {self.model.name!r} reflection model")
         m = sh.num_coeffs(self.config.sh_order)
         fixed = np.zeros((m, 3))
         k = min(m, known.shape[0])
@@ -213,10 +214,33 @@ def estimate(data: MultiViewData, method: str = "bilinear-clustered", config: Es
     cls = get_method(method)
     t0 = time.perf_counter()
     prep = prepare(data, config, log)
+    if not np.any(prep.obs.rgb > 0):
+        raise InputError("every observed pixel is black or negative: there is no light to estimate from "
+                         "(check the images' exposure and sign)")
     t = time.perf_counter()
+    try:
+        est = _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates)
+    except np.linalg.LinAlgError as exc:
+        raise InputError(f"the solve is singular ({exc}): the observations do not determine the albedos and "
+                         "the light (too few lit views or faces?)") from None
+    for name in ("diffuse", "specular", "pseudo_sh"):
+        if not np.all(np.isfinite(getattr(est, name))):
+            raise InputError(f"the solve produced non-finite {name}: the observations do not determine the "
+                             "albedos and the light (too few lit views or faces?)")
+    est.info["timings"] = {**prep.timings, "solve": time.perf_counter() - t, "total": time.perf_counter() - t0}
+    est.info["observations"] = int(len(prep.obs.face))
+    est.info["observations_all"] = int(len(prep.all_obs.face))
+    est.info["unobserved_share"] = float(1.0 - est.observed.mean())
+    est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
+    rejected = prep.all_obs.rejected
+    est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
+    return est
+
+
+def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates) -> Estimate:
     if exponent_candidates:
         if not reflection_model(config).uses_exponent:
-            raise ValueError("estimating the Phong exponent needs a model that depends on it: "
+            raise InputError("estimating the Phong exponent needs a model that depends on it: "
                              "specular_model='lobe' or diffuse_light='defiltered'")
         tried = {}
         for n in exponent_candidates:
@@ -226,11 +250,5 @@ def estimate(data: MultiViewData, method: str = "bilinear-clustered", config: Es
                 log(f"phong exponent {n}: residual {tried[float(n)].info['residuals'][-1]:.5f}")
         est = min(tried.values(), key=lambda e: e.info["residuals"][-1])
         est.info["exponent_selection"] = {str(n): e.info["residuals"][-1] for n, e in tried.items()}
-    else:
-        est = cls(config, known_sh, known_radiance).solve(prep)
-    est.info["timings"] = {**prep.timings, "solve": time.perf_counter() - t, "total": time.perf_counter() - t0}
-    est.info["observations"] = int(len(prep.obs.face))
-    est.info["observations_all"] = int(len(prep.all_obs.face))
-    est.info["unobserved_share"] = float(1.0 - est.observed.mean())
-    est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
-    return est
+        return est
+    return cls(config, known_sh, known_radiance).solve(prep)

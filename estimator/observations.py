@@ -7,6 +7,7 @@ import numpy as np
 
 from .data import TriangleMesh, View
 from .raycast import RayCaster
+from .errors import InputError
 
 
 @dataclass(frozen=True)
@@ -19,6 +20,7 @@ class Observations:
     rgb : (N, 3) float64 mean colour of the pixels whose centre ray hits the face.
     view_dir : (N, 3) unit direction from the face centroid to the camera.
     num_faces, num_views : int
+    rejected : (num_views,) int64 object pixels dropped per view as negative beyond noise.
     """
 
     face: np.ndarray
@@ -26,10 +28,12 @@ class Observations:
     view_dir: np.ndarray
     num_faces: int
     num_views: int
+    rejected: np.ndarray | None = None
 
     def subset(self, keep: np.ndarray) -> "Observations":
         """The rows where ``keep`` (N,) is true."""
-        return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views)
+        return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
+                            self.rejected)
 
     def observed_faces(self) -> np.ndarray:
         """(F,) bool: faces with at least one row."""
@@ -53,7 +57,8 @@ class Observations:
 
 
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 1,
-                        min_alpha: float = 0.999, pure_pixels: bool = True) -> Observations:
+                        min_alpha: float = 0.999, pure_pixels: bool = True,
+                        negative_tolerance: float = 0.01) -> Observations:
     """Face-ID buffers by primary rays through pixel centres, then per-face mean colours.
 
     Occlusion is exact: a pixel belongs to the first face its centre ray hits.
@@ -61,20 +66,27 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     are used, so antialiased pixels that mix two faces' albedos do not bias
     small or thin regions. Pixels with coverage ``alpha < min_alpha``
     (silhouette edges) are skipped, and faces covered by fewer than
-    ``min_pixels`` usable pixels in a view give no row.
+    ``min_pixels`` usable pixels in a view give no row. Pixels with a channel below
+    ``-negative_tolerance`` x the view's 99th-percentile object value are not light
+    (noise never goes that far below zero): they are dropped and counted per view.
     """
     mesh: TriangleMesh = caster.mesh
     f = mesh.num_faces
     centroids = mesh.centroids
-    parts = []
+    parts, rejected = [], []
     buffers = caster.face_id_buffers([v.camera for v in views], pure=pure_pixels)
     for view, ids in zip(views, buffers):
         ids = ids.ravel()
         valid = ids >= 0
         if view.alpha is not None:
             valid &= view.alpha.ravel() >= min_alpha
+        rgb = view.rgb.reshape(-1, 3)
+        level = float(np.percentile(rgb[valid].max(axis=1), 99)) if valid.any() else 0.0
+        negative = valid & np.any(rgb < -negative_tolerance * max(level, 1e-30), axis=1)
+        rejected.append(int(negative.sum()))
+        valid &= ~negative
         ids = ids[valid]
-        rgb = view.rgb.reshape(-1, 3)[valid].astype(np.float64)
+        rgb = rgb[valid].astype(np.float64)
         counts = np.bincount(ids, minlength=f)
         sums = np.stack([np.bincount(ids, rgb[:, c], minlength=f) for c in range(3)], axis=1)
         faces = np.nonzero(counts >= max(min_pixels, 1))[0]
@@ -83,9 +95,9 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         parts.append((faces, sums[faces] / counts[faces, None], to_cam))
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
     if len(blind) == len(views):
-        raise ValueError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
+        raise InputError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
     if blind:
-        raise ValueError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
+        raise InputError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
     face, rgb, view_dir = (np.concatenate(p) for p in zip(*parts))
-    return Observations(face.astype(np.int64), rgb, view_dir, f, len(views))
+    return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64))

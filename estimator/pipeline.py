@@ -13,6 +13,7 @@ from .observations import Observations, gather_observations
 from .raycast import RayCaster
 from .reflection import mirror_directions
 from .visibility import SphereSampling, Visibility, compute_visibility, sphere_sampling
+from .errors import InputError
 
 
 @dataclass
@@ -58,9 +59,10 @@ def _model_matrices(data: MultiViewData, model: ReflectionModel, sampling: Spher
 def with_config(prep: Prepared, config: EstimatorConfig) -> Prepared:
     """The same observations and shadow function under another model configuration
     (e.g. another Phong exponent): only the reflection matrices are recomputed."""
-    for key in ("directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "variant"):
+    for key in ("directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "negative_tolerance",
+                "variant"):
         if getattr(config, key) != getattr(prep.config, key):
-            raise ValueError(f"with_config cannot change {key}; run prepare() again")
+            raise InputError(f"with_config cannot change {key}; run prepare() again")
     t = time.perf_counter()
     model = reflection_model(config)
     c_matrix, d_rows = _model_matrices(prep.data, model, prep.sampling, prep.visibility, prep.obs)
@@ -75,12 +77,13 @@ def prepare(data: MultiViewData, config: EstimatorConfig, log=None) -> Prepared:
     timings = {}
     t = time.perf_counter()
     caster = RayCaster(data.mesh, config.variant)
-    all_obs = gather_observations(caster, data.views, config.min_pixels, config.min_coverage, config.pure_pixels)
+    all_obs = gather_observations(caster, data.views, config.min_pixels, config.min_coverage, config.pure_pixels,
+                                  config.negative_tolerance)
     normals = data.mesh.face_normals
     cos_view = np.sum(normals[all_obs.face] * all_obs.view_dir, axis=1)
     obs = all_obs.subset(cos_view > config.min_cos_view)
     if len(obs.face) == 0:
-        raise ValueError(f"no observation passes min_cos_view={config.min_cos_view}")
+        raise InputError(f"no observation passes min_cos_view={config.min_cos_view}")
     timings["observations"] = time.perf_counter() - t
     say(f"observations: {len(all_obs.face)} (face, view) pairs, {len(obs.face)} kept "
         f"(view within acos({config.min_cos_view}) of the normal)")

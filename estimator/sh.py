@@ -21,12 +21,13 @@ import numpy as np
 from scipy import special
 
 from . import latlong
+from .errors import InputError
 
 
 def num_coeffs(order: int) -> int:
     """Number of coefficients of an order-``order`` expansion: (L + 1)^2."""
     if order < 0:
-        raise ValueError(f"SH order must be >= 0, got {order}")
+        raise InputError(f"SH order must be >= 0, got {order}")
     return (order + 1) ** 2
 
 
@@ -34,7 +35,7 @@ def order_of(count: int) -> int:
     """The order L of an expansion with ``count`` = (L + 1)^2 coefficients."""
     order = int(round(np.sqrt(count))) - 1
     if order < 0 or (order + 1) ** 2 != count:
-        raise ValueError(f"{count} is not a number of SH coefficients (L + 1)^2")
+        raise InputError(f"{count} is not a number of SH coefficients (L + 1)^2")
     return order
 
 
@@ -62,7 +63,7 @@ def basis(order: int, dirs: np.ndarray) -> np.ndarray:
     """
     d = np.asarray(dirs, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] != 3:
-        raise ValueError(f"dirs must have shape (N, 3), got {d.shape}")
+        raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
     x, y, z = d[:, 0], d[:, 1], d[:, 2]
     out = np.empty((d.shape[0], num_coeffs(order)))
     xy = np.ones_like(x) + 0j  # (x + i y)^m
@@ -98,7 +99,7 @@ def rotation_matrix(order: int, rotation: np.ndarray) -> np.ndarray:
     """
     rotation = np.asarray(rotation, dtype=np.float64)
     if rotation.shape != (3, 3) or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-8):
-        raise ValueError("rotation must be a 3x3 orthogonal matrix")
+        raise InputError("rotation must be a 3x3 orthogonal matrix")
     pts = fibonacci_sphere(4 * num_coeffs(order) + 64)
     y = basis(order, pts)
     y_rot = basis(order, pts @ rotation)  # rows: Y(R^T p)
@@ -114,7 +115,7 @@ def axis_angle_matrix(axis, degrees_: float) -> np.ndarray:
     if isinstance(axis, str):
         lookup = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}
         if axis.lower() not in lookup:
-            raise ValueError(f"axis must be x, y, z or a 3-vector, got {axis!r}")
+            raise InputError(f"axis must be x, y, z or a 3-vector, got {axis!r}")
         axis = lookup[axis.lower()]
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
@@ -126,7 +127,7 @@ def axis_angle_matrix(axis, degrees_: float) -> np.ndarray:
 def fibonacci_sphere(n: int) -> np.ndarray:
     """``n`` nearly uniform unit directions (golden-spiral lattice), shape (n, 3)."""
     if n < 4:
-        raise ValueError(f"need at least 4 directions, got {n}")
+        raise InputError(f"need at least 4 directions, got {n}")
     i = np.arange(n) + 0.5
     y = 1.0 - 2.0 * i / n
     r = np.sqrt(1.0 - y * y)
@@ -165,7 +166,7 @@ def to_latlong(coeffs: np.ndarray, height: int, width: int) -> np.ndarray:
     coeffs = np.asarray(coeffs, dtype=np.float64)
     order = order_of(coeffs.shape[0])
     if num_coeffs(order) != coeffs.shape[0]:
-        raise ValueError(f"{coeffs.shape[0]} is not a square number of SH coefficients")
+        raise InputError(f"{coeffs.shape[0]} is not a square number of SH coefficients")
     dirs = latlong.directions(height, width).reshape(-1, 3)
     return (basis(order, dirs) @ coeffs).reshape(height, width, -1)
 
@@ -185,7 +186,7 @@ def phong_filter(order: int, exponent: float) -> np.ndarray:
     """
     n = float(exponent)
     if not n > -1.0:
-        raise ValueError(f"Phong exponent must be > -1, got {exponent}")
+        raise InputError(f"Phong exponent must be > -1, got {exponent}")
     l = np.arange(order + 1, dtype=np.float64)
     a = 1.0 + 0.5 * (n - l)
     log_common = 0.5 * np.log(np.pi) - (n + 1) * np.log(2.0) + special.gammaln(n + 1) - special.gammaln(0.5 * (n + l + 3))
@@ -209,7 +210,7 @@ def pseudo_illumination(radiance: np.ndarray, exponent: float, order: int | None
     have = order_of(radiance.shape[0])
     order = have if order is None else order
     if order > have:
-        raise ValueError(f"the radiance SH have order {have}, cannot filter to order {order}")
+        raise InputError(f"the radiance SH have order {have}, cannot filter to order {order}")
     out = radiance[: num_coeffs(order)] * expand_per_degree(phong_filter(order, exponent))[:, None]
     dc = np.where(np.abs(out[0]) > 0, out[0], 1.0)
     return out / dc

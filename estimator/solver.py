@@ -7,6 +7,7 @@ import numpy as np
 from scipy import sparse
 
 from .config import COMPONENTS, EstimatorConfig
+from .errors import InputError
 
 LM_SCHEDULE = EstimatorConfig().lm_schedule
 
@@ -153,10 +154,10 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
     BilinearResult with the residual after every step (ALS, then LM).
     """
     if components not in COMPONENTS:
-        raise ValueError(f"components must be one of {COMPONENTS}, got {components!r}")
+        raise InputError(f"components must be one of {COMPONENTS}, got {components!r}")
     n, m = c_rows.shape
     if rgb.shape != (n, 3) or d_rows.shape != (n, m) or group.shape != (n,):
-        raise ValueError("solve_bilinear: rgb (N, 3), group (N,), c_rows and d_rows (N, M) must agree")
+        raise InputError("solve_bilinear: rgb (N, 3), group (N,), c_rows and d_rows (N, M) must agree")
     h = np.zeros((m, 3))
     h[0] = 1.0
     if fixed_light is not None:

@@ -1,6 +1,10 @@
 """Regression checks of metrics against a stored baseline, with per-metric tolerances."""
 from __future__ import annotations
 
+import math
+
+from estimator.errors import InputError
+
 from .html import lookup
 
 # dotted metric path -> (which direction is better, absolute tolerance)
@@ -24,10 +28,32 @@ TRACKED: dict[str, tuple[str, float]] = {
 def make_baseline(metrics: dict) -> dict:
     """A baseline from a metrics dict: the tracked values it has, with their tolerances."""
     values = {path: lookup(metrics, path) for path in TRACKED}
-    values = {k: float(v) for k, v in values.items() if v is not None}
+    values = {k: float(v) for k, v in values.items()
+              if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
     return {"scene": metrics.get("scene"), "method": metrics.get("method"),
             "parameters": metrics.get("parameters"), "metrics": values,
             "tolerances": {k: {"better": TRACKED[k][0], "tolerance": TRACKED[k][1]} for k in values}}
+
+
+def validate_baseline(baseline, source: str = "baseline") -> dict:
+    """Check a baseline's structure; raises InputError naming ``source`` and the metric."""
+    if not isinstance(baseline, dict) or not isinstance(baseline.get("metrics"), dict):
+        raise InputError(f"{source}: a baseline is a JSON object with a 'metrics' table")
+    tolerances = baseline.get("tolerances", {})
+    if not isinstance(tolerances, dict):
+        raise InputError(f"{source}: 'tolerances' must be a table")
+    for path, value in baseline["metrics"].items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise InputError(f"{source}: metrics.{path} must be a finite number, got {value!r}")
+        entry = tolerances.get(path)
+        if entry is None:
+            continue
+        if not isinstance(entry, dict) or entry.get("better") not in ("higher", "lower") \
+                or isinstance(entry.get("tolerance"), bool) or not isinstance(entry.get("tolerance"), (int, float)) \
+                or not math.isfinite(entry["tolerance"]) or entry["tolerance"] < 0:
+            raise InputError(f"{source}: tolerances.{path} must be {{better: 'higher'|'lower', tolerance: number >= 0}}, "
+                             f"got {entry!r}")
+    return baseline
 
 
 def check(metrics: dict, baseline: dict) -> list[dict]:
@@ -35,17 +61,16 @@ def check(metrics: dict, baseline: dict) -> list[dict]:
 
     A metric is worse when it moved in the bad direction by more than its
     tolerance (the baseline's own, else :data:`TRACKED`'s); missing when the
-    current metrics lack it.
+    current metrics lack it or it is not a finite number (a NaN never passes).
     """
-    if "metrics" not in baseline:
-        raise ValueError("baseline has no 'metrics' table")
+    validate_baseline(baseline)
     rows = []
     for path, base in baseline["metrics"].items():
         tol_entry = baseline.get("tolerances", {}).get(path)
         better, tol = (tol_entry["better"], tol_entry["tolerance"]) if tol_entry else TRACKED.get(path, ("higher", 0.0))
         current = lookup(metrics, path)
-        if current is None:
-            status = "missing"
+        if isinstance(current, bool) or not isinstance(current, (int, float)) or not math.isfinite(current):
+            current, status = None, "missing"
         else:
             change = (current - base) if better == "higher" else (base - current)
             status = "worse" if change < -tol else "ok"

@@ -1,33 +1,51 @@
-"""The ``pseudolight`` command line."""
+"""The ``pseudolight`` command line.
+
+Bad input (any :class:`estimator.errors.InputError`) ends with one line naming the
+file, key or flag and exit code 2; an interrupt (Ctrl-C, SIGTERM) with 130 or
+143 and no partial output; anything else is a bug and keeps its traceback (exit 1).
+"""
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
+import signal
 import sys
 import time
 
 import numpy as np
 
-from estimator.backend import VARIANTS, BackendError
+from estimator.backend import VARIANTS
+from estimator.errors import InputError
 
-from harness.io.atomic import OutputExistsError
-from harness.io.dataset import DatasetError
-from harness.io.runs import RunError, estimator_settings
-from harness.scene.spec import SCENES_DIR, SpecError, load_spec, resolve_scene, shipped_scenes
+from harness.io.atomic import OutputError, check_output
+from harness.io.jsonio import load_json
+from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
 
 DEFAULT_SCENE = "earth-specular"
-USER_ERRORS = (RunError, SpecError, DatasetError, BackendError, OutputExistsError, FileNotFoundError, ValueError)
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: unwind like Ctrl-C, so atomic outputs are cleaned up."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
 
 
 def _peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def _err(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
 def _overrides(args) -> dict:
     out = {}
-    if args.resolution:
+    if args.resolution is not None:
         out["cameras.width"] = out["cameras.height"] = args.resolution
     if args.views is not None:
         out["cameras.count"] = args.views
@@ -38,6 +56,22 @@ def _overrides(args) -> dict:
     if args.seed is not None:
         out["seed"] = args.seed
     return out
+
+
+def _rotation(flag: str, values) -> tuple[str, float] | None:
+    """(axis, degrees) of a ``--rotate-illumination AXIS DEG`` flag, validated."""
+    if values is None:
+        return None
+    axis, text = values
+    if axis not in ("x", "y", "z"):
+        raise InputError(f"{flag}: axis must be x, y or z, got {axis!r}")
+    try:
+        degrees = float(text)
+    except ValueError:
+        raise InputError(f"{flag}: angle must be a number of degrees, got {text!r}") from None
+    if not math.isfinite(degrees):
+        raise InputError(f"{flag}: angle must be finite, got {text!r}")
+    return axis, degrees
 
 
 def cmd_scenes(args) -> int:
@@ -53,7 +87,8 @@ def cmd_generate(args) -> int:
     from harness.scene.generate import generate
 
     spec = load_spec(resolve_scene(args.scene), args.profile, _overrides(args))
-    summary = generate(spec, args.output, overwrite=args.overwrite, variant=args.variant)
+    check_output(args.output, spec.inputs(), args.overwrite)
+    summary = generate(spec, args.output, overwrite=args.overwrite, variant=args.variant, log=_err)
     summary["peak_rss_mib"] = _peak_rss_mib()
     print(json.dumps(summary, indent=1) if args.json else
           f"dataset {summary['scene']}: {summary['views']} views + {summary['test_views']} test views, "
@@ -63,12 +98,11 @@ def cmd_generate(args) -> int:
 
 
 def _load_baseline(path: str | None) -> dict | None:
+    from reports.regression import validate_baseline
+
     if path is None:
         return None
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"baseline not found: {path}")
-    with open(path) as f:
-        return json.load(f)
+    return validate_baseline(load_json(path, "baseline"), path)
 
 
 def _report_exit(metrics: dict, regressions, out: str) -> int:
@@ -83,24 +117,60 @@ def _report_exit(metrics: dict, regressions, out: str) -> int:
         return 0
     worse = [r for r in regressions if r["status"] != "ok"]
     for r in worse:
-        now = "missing" if r["current"] is None else f"{r['current']:.4g}"
-        print(f"REGRESSION {r['metric']}: baseline {r['baseline']:.4g}, now {now} "
-              f"({r['direction']} is better, tolerance {r['tolerance']:g})", file=sys.stderr)
+        now = "missing or not a finite number" if r["current"] is None else f"{r['current']:.4g}"
+        _err(f"REGRESSION {r['metric']}: baseline {r['baseline']:.4g}, now {now} "
+             f"({r['direction']} is better, tolerance {r['tolerance']:g})")
     print(f"baseline: {len(regressions) - len(worse)} of {len(regressions)} tracked metrics within tolerance")
     return 1 if worse else 0
 
 
+def _check_json_target(path: str, inputs: list) -> str:
+    """Refuse a JSON output file that is an input, a folder, or in an unwritable place."""
+    target = os.path.realpath(os.path.abspath(path))
+    for item in inputs:
+        if item and os.path.realpath(os.path.abspath(item)) == target:
+            raise OutputError(f"{path} is an input of this command; choose another file")
+    if os.path.isdir(target):
+        raise OutputError(f"{path} is a folder, not a file")
+    parent = os.path.dirname(target)
+    if not os.path.isdir(parent) or not os.access(parent, os.W_OK):
+        raise OutputError(f"cannot write {path}: {parent} is not a writable folder")
+    return target
+
+
+def _write_json_file(path: str, value: dict, inputs: list) -> None:
+    """Write a JSON file whole (temporary file, then rename), never over an input."""
+    from harness.io.jsonio import dump_json
+
+    target = _check_json_target(path, inputs)
+    tmp = f"{target}.partial-{os.getpid()}"
+    try:
+        dump_json(tmp, value)
+        os.replace(tmp, target)
+    except OSError as exc:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
 def cmd_report(args) -> int:
     from harness.cli.reporting import build_report
+    from harness.io.runs import read_run
 
-    metrics, regressions = build_report(args.run, args.output, args.dataset, tuple(args.rotate_illumination),
-                                        args.cross_check_spp, not args.no_mitsuba, _load_baseline(args.baseline),
-                                        args.overwrite, log=lambda m: print(m, file=sys.stderr))
+    rotation = _rotation("--rotate-illumination", args.rotate_illumination)
+    _, run = read_run(args.run)
+    dataset = args.dataset or run["dataset"]
+    inputs = [args.run, dataset, args.baseline]
+    check_output(args.output, inputs, args.overwrite)
+    if args.write_baseline:
+        _check_json_target(args.write_baseline, inputs)
+    baseline = _load_baseline(args.baseline)
+    metrics, regressions = build_report(args.run, args.output, dataset, rotation, args.cross_check_spp,
+                                        not args.no_mitsuba, baseline, args.overwrite, log=_err)
     if args.write_baseline:
         from reports.regression import make_baseline
 
-        with open(args.write_baseline, "w") as f:
-            json.dump(make_baseline(metrics), f, indent=1)
+        _write_json_file(args.write_baseline, make_baseline(metrics), inputs)
         print(f"baseline written to {args.write_baseline}")
     return _report_exit(metrics, regressions, args.output)
 
@@ -108,6 +178,7 @@ def cmd_report(args) -> int:
 def cmd_compare(args) -> int:
     from harness.cli.reporting import compare_runs, print_table
 
+    check_output(args.output, args.runs, args.overwrite)
     rows = compare_runs(args.runs, args.output, overwrite=args.overwrite)
     print_table(rows)
     print(f"comparison: {os.path.abspath(os.path.join(args.output, 'compare.html'))}")
@@ -118,8 +189,9 @@ def cmd_suite(args) -> int:
     from harness.cli.reporting import print_table
     from harness.cli.suite import load_suite, run_suite
 
-    rows = run_suite(load_suite(args.suite), args.output, args.profile, not args.no_mitsuba, args.overwrite,
-                     log=lambda m: print(m, file=sys.stderr))
+    suite = load_suite(args.suite)
+    check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
+    rows = run_suite(suite, args.output, args.profile, not args.no_mitsuba, args.overwrite, log=_err)
     print_table(rows)
     print(f"comparison: {os.path.abspath(os.path.join(args.output, 'compare', 'compare.html'))}")
     return 0
@@ -131,13 +203,13 @@ def cmd_demo(args) -> int:
 
     root = os.path.join(args.output, DEFAULT_SCENE)
     data_dir = os.path.join(root, "dataset")
+    check_output(os.path.join(root, "run"), [SCENES_DIR], True)
     t0 = time.perf_counter()
-    ensure_dataset(DEFAULT_SCENE, data_dir, overwrite=args.overwrite, variant=args.variant)
+    ensure_dataset(DEFAULT_SCENE, data_dir, overwrite=args.overwrite, variant=args.variant, log=_err)
     baseline = os.path.join(SCENES_DIR, "baselines", f"{DEFAULT_SCENE}.json")
     _, metrics, regressions = run_method(data_dir, None, os.path.join(root, "run"), os.path.join(root, "report"),
                                          baseline=_load_baseline(baseline) if os.path.isfile(baseline) else None,
-                                         overrides={"variant": args.variant} if args.variant else None,
-                                         log=lambda m: print(m, file=sys.stderr))
+                                         overrides={"variant": args.variant} if args.variant else None, log=_err)
     print(f"total {time.perf_counter() - t0:.1f} s, peak {_peak_rss_mib():.0f} MiB")
     return _report_exit(metrics, regressions, os.path.join(root, "report"))
 
@@ -154,19 +226,20 @@ def _positive_float(flag: str, text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise ValueError(f"{flag} must be a number or 'auto', got {text!r}") from None
-    if not value > 0:
-        raise ValueError(f"{flag} must be > 0, got {value}")
+        raise InputError(f"{flag} must be a number or 'auto', got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"{flag} must be a finite number > 0, got {text!r}")
     return value
 
 
 def cmd_estimate(args) -> int:
     from estimator.methods import EXPONENT_CANDIDATES, estimate, get_method
 
-    from harness.io.dataset import read_dataset
-    from harness.io.runs import write_run
+    from harness.io.dataset import fingerprint, read_dataset, read_ground_truth
+    from harness.io.runs import estimator_settings, write_run
 
-    ds = read_dataset(args.dataset, load_test=False)
+    check_output(args.output, [args.dataset, args.truth], args.overwrite)
+    ds = read_dataset(args.dataset, load_test=False, load_truth=False)
     flags = _config_flags(args)
     candidates = None
     if flags.get("phong_exponent") == "auto":
@@ -177,14 +250,18 @@ def cmd_estimate(args) -> int:
     method, config = estimator_settings(ds.meta, args.method, flags)
     known = {}
     if get_method(method).needs_illumination:
-        if ds.ground_truth is None:
-            raise ValueError(f"method {method} needs the true illumination, and {args.dataset} has no ground_truth/")
-        known = ds.ground_truth.known_light()
-    est = estimate(ds.data, method, config, **known, log=lambda m: print(f"  {m}", file=sys.stderr),
-                   exponent_candidates=candidates)
+        source = os.path.abspath(args.truth or args.dataset)
+        truth = read_ground_truth(source, ds.data.mesh.num_faces)
+        if truth is None:
+            raise InputError(f"method {method} needs the true light, and {source} has no ground_truth/ "
+                             "(pass --truth DATASET)")
+        known = truth.known_light()
+    est = estimate(ds.data, method, config, **known, log=lambda m: _err(f"  {m}"), exponent_candidates=candidates)
+    for name, count in est.info.get("rejected_pixels", {}).items():
+        _err(f"warning: {name}: {count} pixels negative beyond noise were left out")
     est.info["peak_rss_mib"] = _peak_rss_mib()
-    write_run(args.output, est, args.dataset, overwrite=args.overwrite,
-              extra={"scene": ds.meta.get("scene")})
+    write_run(args.output, est, args.dataset, overwrite=args.overwrite, extra={"scene": ds.meta.get("scene")},
+              fingerprint=fingerprint(ds.data))
     t = est.info["timings"]
     print(f"{method} on {ds.meta.get('scene', args.dataset)}: {est.info.get('clusters', '?')} clusters, "
           f"{100 * est.observed.mean():.1f}% faces estimated, {t['total']:.1f} s "
@@ -203,24 +280,44 @@ def cmd_render(args) -> int:
     from harness.io.exr import write_exr
     from harness.io.runs import read_run
 
+    rotation = _rotation("--rotate-illumination", args.rotate_illumination)
     est, run = read_run(args.run)
-    ds = read_dataset(args.dataset or run["dataset"])
+    dataset = args.dataset or run["dataset"]
+    check_output(args.output, [args.run, dataset], args.overwrite)
+    ds = read_dataset(dataset, load_truth=False)
     views = {"test": ds.data.test_views, "train": ds.data.views,
              "all": ds.data.views + ds.data.test_views}[args.frames]
     if not views:
-        raise ValueError(f"the dataset has no {args.frames} frames")
-    rotation = None
-    if args.rotate_illumination:
-        axis, degrees = args.rotate_illumination
-        rotation = axis_angle_matrix(axis, float(degrees))
+        raise InputError(f"the dataset {ds.path} has no {args.frames} frames")
+    rotation = None if rotation is None else axis_angle_matrix(*rotation)
     predictor = Predictor(ds.data.mesh, est)
-    with atomic_directory(args.output, overwrite=args.overwrite) as tmp:
+    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, dataset], kind="render") as tmp:
         for view in views:
             rgb, coverage = predictor.predict(view.camera, rotation)
             name = os.path.splitext(os.path.basename(view.name))[0] + ".exr"
             write_exr(os.path.join(tmp, name), np.concatenate([rgb, coverage[..., None]], axis=2))
     print(f"{len(views)} predicted images written to {os.path.abspath(args.output)}")
     return 0
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {value}")
+    return value
 
 
 def _add_estimator_flags(p) -> None:
@@ -253,11 +350,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("scene", help="scene spec TOML, or the name of a shipped scene")
     g.add_argument("-o", "--output", required=True, help="dataset folder to create")
     g.add_argument("--profile", help="a [profiles.NAME] table of the spec, e.g. benchmark")
-    g.add_argument("--resolution", type=int, help="image width and height in pixels")
-    g.add_argument("--views", type=int, help="number of training views")
-    g.add_argument("--test-views", type=int, help="number of held-out test views")
-    g.add_argument("--spp", type=int, help="samples per pixel")
-    g.add_argument("--seed", type=int)
+    g.add_argument("--resolution", type=_positive_int, help="image width and height in pixels")
+    g.add_argument("--views", type=_positive_int, help="number of training views")
+    g.add_argument("--test-views", type=_count, help="number of held-out test views")
+    g.add_argument("--spp", type=_positive_int, help="samples per pixel")
+    g.add_argument("--seed", type=_count)
     g.add_argument("--variant", choices=VARIANTS + ("auto",))
     g.add_argument("--overwrite", action="store_true", help="replace an existing dataset folder")
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -267,6 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("dataset")
     e.add_argument("-o", "--output", required=True, help="run folder to create")
     e.add_argument("--overwrite", action="store_true")
+    e.add_argument("--truth", metavar="DATASET", help="dataset whose ground_truth/ gives the known light of the "
+                                                      "known-illumination oracle (default: the dataset itself)")
     _add_estimator_flags(e)
     e.set_defaults(func=cmd_estimate)
 
@@ -288,7 +387,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--write-baseline", metavar="FILE", help="store this report's tracked metrics as a baseline")
     rp.add_argument("--rotate-illumination", nargs=2, metavar=("AXIS", "DEG"), default=["y", "90"],
                     help="relighting test: turn the light about x, y or z (default: y 90)")
-    rp.add_argument("--cross-check-spp", type=int,
+    rp.add_argument("--cross-check-spp", type=_positive_int,
                     help="spp of the Mitsuba re-render (default 64; 512 for --specular-model lobe)")
     rp.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba re-render cross-check")
     rp.add_argument("--overwrite", action="store_true")
@@ -318,14 +417,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)
-    except USER_ERRORS as exc:
+    except InputError as exc:
         print(f"pseudolight: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("pseudolight: interrupted; no partial output was left", file=sys.stderr)
         return 130
+    except Terminated:
+        print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
+        return 143
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

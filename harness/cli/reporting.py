@@ -4,12 +4,12 @@ and writing the report and comparison folders atomically. The content (metrics,
 figures, columns) is :mod:`reports.report`'s."""
 from __future__ import annotations
 
-import json
 import os
 import time
 
 import numpy as np
 
+from estimator.errors import InputError
 from estimator.forward import Predictor
 from estimator.models import NoMitsubaEquivalent
 from estimator.sh import axis_angle_matrix
@@ -17,8 +17,9 @@ from reports.html import compare_page, report_page
 from reports.regression import check
 from reports.report import COMPARE_COLUMNS, Renders, assemble, compare_figures, compare_row, text_table
 
-from harness.io.atomic import atomic_directory
-from harness.io.dataset import read_dataset
+from harness.io.atomic import atomic_directory, check_output
+from harness.io.dataset import fingerprint, read_dataset
+from harness.io.jsonio import dump_json, load_json
 from harness.io.runs import RunError, read_run, versions
 from harness.scene.export import export_scene, render_estimate
 from harness.scene.relight import render_truth
@@ -36,11 +37,21 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     """
     t0 = time.perf_counter()
     est, run = read_run(run_dir)
-    ds = read_dataset(dataset_dir or run["dataset"])
+    dataset_dir = dataset_dir or run["dataset"]
+    check_output(out_dir, [run_dir, dataset_dir], overwrite)
+    ds = read_dataset(dataset_dir)
     if ds.ground_truth is None:
-        raise ValueError(f"{ds.path} has no ground_truth/: a report compares with ground truth")
+        raise InputError(f"{ds.path} has no ground_truth/: a report compares with ground truth")
     if ds.data.mesh.num_faces != est.diffuse.shape[0]:
-        raise ValueError(f"the run has {est.diffuse.shape[0]} faces, the dataset's mesh {ds.data.mesh.num_faces}")
+        raise InputError(f"the run {run_dir} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
+                         f"{ds.data.mesh.num_faces}")
+    recorded = run.get("fingerprint")
+    if isinstance(recorded, dict):
+        current = fingerprint(ds.data)
+        differ = [k for k in ("mesh", "cameras", "images") if recorded.get(k) != current[k]]
+        if differ:
+            raise InputError(f"the run {run_dir} was estimated from {run['dataset']}, whose {', '.join(differ)} "
+                             f"differ from those of {ds.path}: report it against its own dataset")
     mesh = ds.data.mesh
     predictor = Predictor(mesh, est)
     views = ds.data.test_views or ds.data.views[:2]
@@ -64,9 +75,8 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     regressions = check(m, baseline) if baseline is not None else None
     m["report_seconds"] = time.perf_counter() - t0
 
-    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
-        with open(os.path.join(tmp, "metrics.json"), "w") as f:
-            json.dump(m, f, indent=1)
+    with atomic_directory(out_dir, overwrite=overwrite, inputs=[run_dir, dataset_dir], kind="report") as tmp:
+        dump_json(os.path.join(tmp, "metrics.json"), m)
         np.savez(os.path.join(tmp, "ratios.npz"), **content.ratios)
         for index, (section, _, png) in enumerate(content.figures):
             with open(os.path.join(tmp, f"fig{index:02d}_{section.lower().replace(' ', '_')}.png"), "wb") as f:
@@ -93,15 +103,18 @@ def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False) -> l
     entries, rows = [], []
     for folder in folders:
         path = find_metrics(folder)
-        with open(path) as f:
-            metrics = json.load(f)
-        ratios = dict(np.load(os.path.join(os.path.dirname(path), "ratios.npz")))
+        metrics = load_json(path, "report metrics", RunError)
+        ratios_path = os.path.join(os.path.dirname(path), "ratios.npz")
+        try:
+            with np.load(ratios_path, allow_pickle=False) as archive:
+                ratios = {k: archive[k] for k in archive.files}
+        except (OSError, ValueError, EOFError):
+            raise RunError(f"{ratios_path}: missing or unreadable (not a .npz archive)") from None
         entries.append((metrics, ratios))
         rows.append(compare_row(metrics, ratios, os.path.abspath(folder)))
     figs = compare_figures(entries)
-    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
-        with open(os.path.join(tmp, "compare.json"), "w") as f:
-            json.dump({"columns": COMPARE_COLUMNS, "rows": rows}, f, indent=1)
+    with atomic_directory(out_dir, overwrite=overwrite, inputs=folders, kind="compare") as tmp:
+        dump_json(os.path.join(tmp, "compare.json"), {"columns": COMPARE_COLUMNS, "rows": rows})
         with open(os.path.join(tmp, "compare.html"), "w") as f:
             f.write(compare_page(rows, COMPARE_COLUMNS, figs))
     return rows

@@ -10,10 +10,11 @@ import time
 import tomllib
 
 from estimator.data import Estimate
+from estimator.errors import InputError
 from estimator.methods import REGISTRY, estimate
 
 from harness.cli.reporting import build_report, compare_runs
-from harness.io.dataset import read_dataset
+from harness.io.dataset import fingerprint, read_dataset, read_ground_truth
 from harness.io.runs import estimator_settings, write_run
 from harness.scene.generate import generate
 from harness.scene.spec import SCENES_DIR, SpecError, load_spec, resolve_scene
@@ -39,6 +40,7 @@ def load_suite(path_or_name: str) -> dict:
             raise SpecError(f"suite.methods: {method!r} is not a registered method ({', '.join(REGISTRY)})")
     for scene in suite["scenes"]:
         resolve_scene(scene)
+    suite["path"] = os.path.abspath(path)
     return suite
 
 
@@ -48,7 +50,8 @@ def ensure_dataset(scene: str, data_dir: str, profile: str | None = None, overwr
     if os.path.isdir(data_dir) and not overwrite:
         log(f"reusing dataset {data_dir} (pass --overwrite to render it again)")
         return
-    summary = generate(load_spec(resolve_scene(scene), profile), data_dir, overwrite=overwrite, variant=variant)
+    summary = generate(load_spec(resolve_scene(scene), profile), data_dir, overwrite=overwrite, variant=variant,
+                       log=log)
     log(f"generated {summary['scene']}: {summary['views']} views in {summary['seconds']['total']:.1f} s")
 
 
@@ -57,11 +60,17 @@ def run_method(data_dir: str, method: str | None, run_dir: str, report_dir: str,
                log=print) -> tuple[Estimate, dict, list[dict] | None]:
     """Estimate a dataset with ``method`` (None: the dataset's recommendation), write the
     run, and report it (against ``baseline`` when given). Returns (estimate, metrics, regressions)."""
-    ds = read_dataset(data_dir, load_test=False)
+    ds = read_dataset(data_dir, load_test=False, load_truth=False)
     method, config = estimator_settings(ds.meta, method, overrides)
-    known = ds.ground_truth.known_light() if REGISTRY[method].needs_illumination else {}
+    known = {}
+    if REGISTRY[method].needs_illumination:
+        truth = read_ground_truth(data_dir, ds.data.mesh.num_faces)
+        if truth is None:
+            raise InputError(f"method {method} needs the true light, and {data_dir} has no ground_truth/")
+        known = truth.known_light()
     est = estimate(ds.data, method, config, **known)
-    write_run(run_dir, est, data_dir, overwrite=True, extra={"scene": ds.meta.get("scene")})
+    write_run(run_dir, est, data_dir, overwrite=True, extra={"scene": ds.meta.get("scene")},
+              fingerprint=fingerprint(ds.data))
     log(f"estimated with {method} ({config.components}) in {est.info['timings']['total']:.1f} s")
     metrics, regressions = build_report(run_dir, report_dir, data_dir, mitsuba=mitsuba, baseline=baseline,
                                         overwrite=True, log=log)

@@ -5,6 +5,7 @@ One folder: ``transforms.json`` (nerfstudio conventions), ``mesh.ply``,
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from dataclasses import dataclass
@@ -12,10 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.camera import Camera
+from estimator.errors import InputError
 from estimator.data import MultiViewData, TriangleMesh, View
 from reports.ground_truth import GroundTruth
 
 from harness.io.exr import read_exr, write_exr
+from harness.io.jsonio import load_json
 from harness.io.mesh import load_mesh_file, save_mesh_ply
 
 FORMAT_NAME = "pseudolight-dataset"
@@ -23,7 +26,7 @@ FORMAT_VERSION = 2  # 2: ground_truth/illumination_sh.npz names its array radian
 _INTRINSIC_KEYS = ("w", "h", "fl_x", "fl_y", "cx", "cy")
 
 
-class DatasetError(ValueError):
+class DatasetError(InputError):
     """A dataset folder that does not follow the format; the message names the file or key."""
 
 
@@ -98,6 +101,12 @@ def write_ground_truth(folder: str, truth: GroundTruth, envmap: np.ndarray | Non
         json.dump({"brdf": truth.brdf, "illumination": truth.illumination, **(extra or {})}, f, indent=1)
 
 
+def _number(where: str, key: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise DatasetError(f"{where}: intrinsic '{key}' must be a finite number, got {value!r}")
+    return float(value)
+
+
 def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
     values = {}
     for key in _INTRINSIC_KEYS:
@@ -108,29 +117,40 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
             angle = frame.get("camera_angle_x", top.get("camera_angle_x"))
             w = frame.get("w", top.get("w"))
             if angle is not None and w is not None:
-                value = 0.5 * w / np.tan(0.5 * angle)
+                value = 0.5 * _number(where, "w", w) / np.tan(0.5 * _number(where, "camera_angle_x", angle))
         if key in ("cx", "cy") and value is None:
             size = frame.get("w" if key == "cx" else "h", top.get("w" if key == "cx" else "h"))
-            value = None if size is None else 0.5 * size
+            value = None if size is None else 0.5 * _number(where, "w" if key == "cx" else "h", size)
         if value is None:
             raise DatasetError(f"{where}: intrinsic '{key}' missing (top level or per frame)")
-        values[key] = value
-    matrix = np.asarray(frame.get("transform_matrix"), dtype=np.float64)
-    if matrix.shape != (4, 4):
-        raise DatasetError(f"{where}: transform_matrix must be 4x4")
+        values[key] = _number(where, key, value)
+    for key in ("w", "h"):
+        if values[key] != int(values[key]) or values[key] < 1:
+            raise DatasetError(f"{where}: intrinsic '{key}' must be a positive integer, got {values[key]:g}")
+    raw = frame.get("transform_matrix")
     try:
-        return Camera(matrix, float(values["fl_x"]), float(values["fl_y"]), float(values["cx"]),
-                      float(values["cy"]), int(values["w"]), int(values["h"]))
-    except ValueError as exc:
-        raise DatasetError(f"{where}: {exc}") from exc
+        matrix = np.asarray(raw, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DatasetError(f"{where}: transform_matrix must be a 4x4 array of numbers, got {str(raw)[:60]!r}") from None
+    if matrix.shape != (4, 4):
+        raise DatasetError(f"{where}: transform_matrix must be a 4x4 array of numbers, got shape {matrix.shape}")
+    try:
+        return Camera(matrix, values["fl_x"], values["fl_y"], values["cx"], values["cy"],
+                      int(values["w"]), int(values["h"]))
+    except InputError as exc:
+        raise DatasetError(f"{where}: {exc}") from None
 
 
-def _read_views(folder: str, frames: list, top: dict, key: str) -> list[View]:
+def _read_views(folder: str, frames, top: dict, key: str) -> list[View]:
+    if not isinstance(frames, list):
+        raise DatasetError(f"transforms.json {key} must be a list of frames, got {type(frames).__name__}")
     views = []
     for k, frame in enumerate(frames):
         where = f"transforms.json {key}[{k}]"
-        if "file_path" not in frame:
-            raise DatasetError(f"{where}: file_path missing")
+        if not isinstance(frame, dict):
+            raise DatasetError(f"{where} must be an object, got {type(frame).__name__}")
+        if not isinstance(frame.get("file_path"), str) or not frame["file_path"]:
+            raise DatasetError(f"{where}: file_path missing or not a string")
         cam = _intrinsics(where, frame, top)
         path = os.path.join(folder, frame["file_path"])
         if not os.path.splitext(path)[1]:
@@ -141,56 +161,111 @@ def _read_views(folder: str, frames: list, top: dict, key: str) -> list[View]:
         alpha = image[..., 3] if image.shape[2] == 4 else None
         try:
             views.append(View(frame["file_path"], cam, image[..., :3], alpha))
-        except ValueError as exc:
-            raise DatasetError(f"{path}: {exc}") from exc
+        except InputError as exc:
+            raise DatasetError(f"{path}: {exc}") from None
     return views
 
 
+def _load_npz(path: str) -> dict:
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            return {k: archive[k] for k in archive.files}
+    except FileNotFoundError:
+        raise DatasetError(f"{path} not found") from None
+    except (OSError, ValueError, EOFError) as exc:
+        reason = "not a .npz archive" if "pickle" in str(exc) or isinstance(exc, (OSError, EOFError)) else exc
+        raise DatasetError(f"{path}: unreadable ({reason})") from None
+
+
 def read_ground_truth(folder: str, num_faces: int) -> GroundTruth | None:
-    """ground_truth/ of a dataset, or None when it has none."""
+    """ground_truth/ of a dataset, or None when it has none. Every missing file or key,
+    wrong shape and non-finite value raises :class:`DatasetError` naming the file and key."""
     gt = os.path.join(folder, "ground_truth")
     if not os.path.isdir(gt):
         return None
-    try:
-        mats = np.load(os.path.join(gt, "materials.npz"))
-        shz = np.load(os.path.join(gt, "illumination_sh.npz"))
-        with open(os.path.join(gt, "illumination.json")) as f:
-            info = json.load(f)
-    except (OSError, ValueError, KeyError) as exc:
-        raise DatasetError(f"{gt}: unreadable ground truth: {exc}") from exc
+    mats = _load_npz(os.path.join(gt, "materials.npz"))
+    shz = _load_npz(os.path.join(gt, "illumination_sh.npz"))
+    info = load_json(os.path.join(gt, "illumination.json"), "ground-truth illumination", DatasetError)
     for key in ("diffuse", "specular"):
+        if key not in mats:
+            raise DatasetError(f"{gt}/materials.npz: key '{key}' missing")
         if mats[key].shape != (num_faces, 3):
             raise DatasetError(f"{gt}/materials.npz: {key} has shape {mats[key].shape}, mesh has {num_faces} faces")
-    radiance = shz["radiance_sh"] if "radiance_sh" in shz else shz["sh"]  # format 1 named it sh
+        bad = ~np.all(np.isfinite(mats[key]), axis=1)
+        if bad.any():
+            raise DatasetError(f"{gt}/materials.npz: {key} has {int(bad.sum())} rows with NaN or Inf "
+                               f"(first: face {int(np.argmax(bad))})")
+    key = "radiance_sh" if "radiance_sh" in shz else "sh"  # format 1 named it sh
+    if key not in shz:
+        raise DatasetError(f"{gt}/illumination_sh.npz: key 'radiance_sh' missing")
+    radiance = np.asarray(shz[key], dtype=np.float64)
+    if radiance.ndim != 2 or radiance.shape[1] != 3 or int(np.sqrt(radiance.shape[0])) ** 2 != radiance.shape[0]:
+        raise DatasetError(f"{gt}/illumination_sh.npz: {key} must be ((L+1)^2, 3), got {radiance.shape}")
+    if not np.all(np.isfinite(radiance)):
+        raise DatasetError(f"{gt}/illumination_sh.npz: {key} contains NaN or Inf")
+    for name in ("brdf", "illumination"):
+        if not isinstance(info.get(name), dict):
+            raise DatasetError(f"{gt}/illumination.json: key '{name}' missing or not an object")
+    exponent = info["brdf"].get("exponent")
+    if isinstance(exponent, bool) or not isinstance(exponent, (int, float)) or not np.isfinite(exponent) or exponent <= 0:
+        raise DatasetError(f"{gt}/illumination.json: brdf.exponent must be a positive number, got {exponent!r}")
+    regions = mats.get("regions")
+    if regions is not None and regions.shape != (num_faces,):
+        raise DatasetError(f"{gt}/materials.npz: regions has shape {regions.shape}, mesh has {num_faces} faces")
     return GroundTruth(diffuse=mats["diffuse"], specular=mats["specular"], radiance_sh=radiance,
-                       brdf=info["brdf"], illumination=info["illumination"],
-                       regions=mats["regions"] if "regions" in mats else None)
+                       brdf=info["brdf"], illumination=info["illumination"], regions=regions)
 
 
-def read_dataset(folder: str | os.PathLike, load_test: bool = True) -> Dataset:
-    """Read a dataset folder; every missing or malformed part raises :class:`DatasetError`."""
+def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: bool = True) -> Dataset:
+    """Read a dataset folder; every missing or malformed part raises :class:`DatasetError`.
+
+    ``load_truth=False`` leaves ``ground_truth`` None without reading it: estimation
+    reads only images, cameras and mesh.
+    """
     folder = os.path.abspath(str(folder))
     tpath = os.path.join(folder, "transforms.json")
     if not os.path.isdir(folder):
         raise DatasetError(f"dataset folder not found: {folder}")
     if not os.path.isfile(tpath):
         raise DatasetError(f"{folder} has no transforms.json")
-    try:
-        with open(tpath) as f:
-            top = json.load(f)
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"{tpath} is not valid JSON: {exc}") from exc
-    mesh_path = os.path.join(folder, top.get("mesh_file_path", "mesh.ply"))
+    top = load_json(tpath, "dataset cameras", DatasetError)
+    version = top.get("format_version", 1)
+    if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= FORMAT_VERSION:
+        raise DatasetError(f"{tpath}: format_version {version!r} is not one this pseudolight reads "
+                           f"(1 to {FORMAT_VERSION}); a newer pseudolight wrote it?")
+    mesh_name = top.get("mesh_file_path", "mesh.ply")
+    if not isinstance(mesh_name, str):
+        raise DatasetError(f"{tpath}: mesh_file_path must be a string, got {mesh_name!r}")
+    mesh_path = os.path.join(folder, mesh_name)
     if not os.path.isfile(mesh_path):
         raise DatasetError(f"{folder} has no mesh ({os.path.basename(mesh_path)} not found)")
     try:
         mesh = load_mesh_file(mesh_path)
-    except ValueError as exc:
-        raise DatasetError(str(exc)) from exc
+    except InputError as exc:
+        raise DatasetError(f"{mesh_path}: {exc}") from None
     frames = top.get("frames", [])
     if not frames:
         raise DatasetError(f"{tpath} has no frames")
     views = _read_views(folder, frames, top, "frames")
     test_views = _read_views(folder, top.get("test_frames", []), top, "test_frames") if load_test else []
     meta = {k: v for k, v in top.items() if k not in ("frames", "test_frames")}
-    return Dataset(folder, MultiViewData(mesh, views, test_views), read_ground_truth(folder, mesh.num_faces), meta)
+    truth = read_ground_truth(folder, mesh.num_faces) if load_truth else None
+    return Dataset(folder, MultiViewData(mesh, views, test_views), truth, meta)
+
+
+def fingerprint(data: MultiViewData) -> dict:
+    """Hashes of what an estimate is computed from: the mesh, the training cameras and
+    the training images (BLAKE2b-128 of the arrays' bytes), so a run can be matched to
+    its dataset."""
+    def digest(arrays) -> str:
+        h = hashlib.blake2b(digest_size=16)
+        for a in arrays:
+            a = np.ascontiguousarray(a)
+            h.update(str(a.shape).encode())
+            h.update(a.tobytes())
+        return h.hexdigest()
+
+    cams = [np.array([*v.camera.c2w.ravel(), v.camera.fx, v.camera.fy, v.camera.cx, v.camera.cy,
+                      v.camera.width, v.camera.height]) for v in data.views]
+    return {"mesh": digest([data.mesh.vertices, data.mesh.faces]), "cameras": digest(cams),
+            "images": digest([v.rgb for v in data.views])}

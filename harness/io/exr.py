@@ -6,6 +6,8 @@ import os
 import numpy as np
 import OpenEXR
 
+from estimator.errors import InputError
+
 
 def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) -> None:
     """Write an (H, W, 3) RGB or (H, W, 4) RGBA linear image, ZIP compressed.
@@ -14,9 +16,9 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) ->
     """
     image = np.asarray(image)
     if image.ndim != 3 or image.shape[2] not in (3, 4):
-        raise ValueError(f"EXR image must be (H, W, 3) or (H, W, 4), got {image.shape}")
+        raise InputError(f"EXR image must be (H, W, 3) or (H, W, 4), got {image.shape}")
     if not np.all(np.isfinite(image)):
-        raise ValueError(f"refusing to write NaN/Inf pixels to {path}")
+        raise InputError(f"refusing to write NaN/Inf pixels to {path}")
     data = np.ascontiguousarray(image, dtype=np.float16 if half else np.float32)
     name = "RGBA" if data.shape[2] == 4 else "RGB"
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
@@ -28,16 +30,16 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
     """Read an EXR as float32 (H, W, C) with C = 4 (RGBA) when it has alpha, else 3."""
     path = str(path)
     if not os.path.isfile(path):
-        raise FileNotFoundError(f"EXR file not found: {path}")
+        raise InputError(f"EXR file not found: {path}")
     try:
         with OpenEXR.File(path) as f:
             channels = {k: v.pixels for k, v in f.channels().items()}
     except Exception as exc:  # OpenEXR raises a bare Exception on corrupt files
-        raise ValueError(f"cannot read EXR file {path}: {exc}") from exc
+        raise InputError(f"cannot read EXR file {path}: {exc}") from exc
     for name in ("RGBA", "RGB"):
         if name in channels:
             return np.asarray(channels[name], dtype=np.float32)
     if all(c in channels for c in "RGB"):
         planes = [channels[c] for c in ("R", "G", "B", "A") if c in channels]
         return np.stack(planes, axis=-1).astype(np.float32)
-    raise ValueError(f"EXR file {path} has no RGB channels (found {sorted(channels)})")
+    raise InputError(f"EXR file {path} has no RGB channels (found {sorted(channels)})")

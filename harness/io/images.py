@@ -6,6 +6,7 @@ import os
 import numpy as np
 
 from estimator import backend
+from estimator.errors import InputError
 
 from harness.io.exr import read_exr
 
@@ -17,18 +18,18 @@ def read_linear_rgb(path: str | os.PathLike) -> np.ndarray:
     """
     path = str(path)
     if not os.path.isfile(path):
-        raise FileNotFoundError(f"image file not found: {path}")
+        raise InputError(f"image file not found: {path}")
     if path.lower().endswith(".exr"):
         return read_exr(path)[..., :3]
     mi = backend.set_variant()
     try:
         bitmap = mi.Bitmap(path)
     except Exception as exc:
-        raise ValueError(f"cannot read image {path}: {exc}") from exc
+        raise InputError(f"cannot read image {path}: {exc}") from exc
     linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
     image = np.array(linear, dtype=np.float32)
     if image.ndim == 2:
         image = np.repeat(image[..., None], 3, axis=2)
     if not np.all(np.isfinite(image)):
-        raise ValueError(f"image {path} contains NaN or Inf pixels")
+        raise InputError(f"image {path} contains NaN or Inf pixels")
     return image

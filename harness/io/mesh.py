@@ -7,6 +7,7 @@ import numpy as np
 import trimesh
 
 from estimator.data import TriangleMesh
+from estimator.errors import InputError
 
 
 def load_mesh_file(path: str | os.PathLike) -> TriangleMesh:
@@ -18,14 +19,14 @@ def load_mesh_with_uv(path: str | os.PathLike) -> tuple[TriangleMesh, np.ndarray
     """(mesh, per-vertex texture coordinates (V, 2) or None) of a mesh file, face order kept."""
     path = str(path)
     if not os.path.isfile(path):
-        raise FileNotFoundError(f"mesh file not found: {path}")
+        raise InputError(f"mesh file not found: {path}")
     try:
         loaded = trimesh.load(path, process=False, force="mesh")
     except Exception as exc:
-        raise ValueError(f"cannot read mesh file {path}: {exc}") from exc
+        raise InputError(f"cannot read mesh file {path}: {exc}") from exc
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if faces.size == 0:
-        raise ValueError(f"mesh file {path} has no faces")
+        raise InputError(f"mesh file {path} has no faces")
     uv = getattr(getattr(loaded, "visual", None), "uv", None)
     uv = None if uv is None or len(uv) != len(loaded.vertices) else np.asarray(uv, dtype=np.float64)
     return TriangleMesh(np.asarray(loaded.vertices), faces), uv

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import platform
 from importlib import metadata
@@ -12,16 +11,18 @@ import numpy as np
 from estimator import sh
 from estimator.config import EstimatorConfig
 from estimator.data import Estimate
+from estimator.errors import InputError
 
 from harness.io.atomic import atomic_directory
 from harness.io.exr import write_exr
+from harness.io.jsonio import dump_json, load_json
 
 ILLUMINATION_MAP_SIZE = (128, 256)
 RUN_FORMAT = "pseudolight-run"
 RUN_FORMAT_VERSION = 2  # 2: estimate.npz names the pseudo illumination pseudo_sh (1: sh)
 
 
-class RunError(ValueError):
+class RunError(InputError):
     """A run folder that is missing or malformed."""
 
 
@@ -46,14 +47,17 @@ def versions() -> dict:
     return out
 
 
-def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False, extra: dict | None = None) -> None:
+def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False, extra: dict | None = None,
+              fingerprint: dict | None = None) -> None:
     """Write an estimate atomically (the folder appears whole or not at all).
 
     ``illumination.exr`` is the pseudo illumination on a 256x128 lat-long map in
     Mitsuba's envmap orientation, clamped at 0 (SH ringing can go negative;
     Mitsuba's envmap needs non-negative radiance); the exact SH are in estimate.npz.
+    ``fingerprint`` (:func:`harness.io.dataset.fingerprint`) identifies the mesh,
+    cameras and images the estimate was computed from; ``report`` checks it.
     """
-    with atomic_directory(folder, overwrite=overwrite) as tmp:
+    with atomic_directory(folder, overwrite=overwrite, inputs=[dataset], kind="run") as tmp:
         extra_arrays = {} if est.radiance_sh is None else {"radiance_sh": est.radiance_sh}
         np.savez(os.path.join(tmp, "estimate.npz"), diffuse=est.diffuse, specular=est.specular, pseudo_sh=est.pseudo_sh,
                  sh_order=est.sh_order, labels=est.labels, observed=est.observed, **extra_arrays)
@@ -65,44 +69,59 @@ def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False,
             "method": est.method,
             "parameters": est.config.to_dict(),
             "dataset": os.path.abspath(dataset),
+            "fingerprint": fingerprint,
             "versions": versions(),
             "faces": int(len(est.observed)),
             "observed_share": float(est.observed.mean()),
             "illumination_exr": {"size": list(ILLUMINATION_MAP_SIZE[::-1]), "clamped_at_zero": True,
                                  "negative_share": float(np.mean(image < 0))},
-            **_jsonable(est.info),
+            **est.info,
             **(extra or {}),
         }
-        with open(os.path.join(tmp, "run.json"), "w") as f:
-            json.dump(run, f, indent=1)
+        dump_json(os.path.join(tmp, "run.json"), run)
 
 
 def read_run(folder: str) -> tuple[Estimate, dict]:
-    """(Estimate, run.json dict) of a run folder."""
+    """(Estimate, run.json dict) of a run folder; anything missing, malformed or
+    non-finite raises :class:`RunError` naming the file and key."""
     folder = os.path.abspath(folder)
     npz, js = os.path.join(folder, "estimate.npz"), os.path.join(folder, "run.json")
+    if not os.path.isdir(folder):
+        raise RunError(f"run folder not found: {folder}")
     for path in (npz, js):
         if not os.path.isfile(path):
             raise RunError(f"{folder} is not a run folder: {os.path.basename(path)} missing")
-    with open(js) as f:
-        run = json.load(f)
-    data = np.load(npz)
-    known = {f.name for f in dataclasses.fields(EstimatorConfig)}
-    config = EstimatorConfig(**{k: v for k, v in run["parameters"].items() if k in known})
-    pseudo = data["pseudo_sh"] if "pseudo_sh" in data else data["sh"]  # run format 1 named it sh
-    est = Estimate(data["diffuse"], data["specular"], pseudo, data["labels"], data["observed"].astype(bool),
+    run = load_json(js, "run", RunError)
+    version = run.get("format_version", 1)
+    if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= RUN_FORMAT_VERSION:
+        raise RunError(f"{js}: format_version {version!r} is not one this pseudolight reads (1 to {RUN_FORMAT_VERSION})")
+    for key, kind in (("method", str), ("parameters", dict), ("dataset", str)):
+        if not isinstance(run.get(key), kind):
+            raise RunError(f"{js}: '{key}' missing or not a {kind.__name__}")
+    try:
+        with np.load(npz, allow_pickle=False) as archive:
+            data = {k: archive[k] for k in archive.files}
+    except (OSError, ValueError, EOFError):
+        raise RunError(f"{npz}: unreadable (not a .npz archive)") from None
+    pseudo_key = "pseudo_sh" if "pseudo_sh" in data else "sh"  # run format 1 named it sh
+    for key in ("diffuse", "specular", pseudo_key, "labels", "observed"):
+        if key not in data:
+            raise RunError(f"{npz}: key '{key}' missing")
+    for key in ("diffuse", "specular", pseudo_key, "radiance_sh"):
+        if key in data and not np.all(np.isfinite(data[key])):
+            raise RunError(f"{npz}: {key} contains NaN or Inf")
+    f = data["diffuse"].shape[0]
+    if data["diffuse"].shape != (f, 3) or data["specular"].shape != (f, 3) or data["labels"].shape != (f,) \
+            or data["observed"].shape != (f,):
+        raise RunError(f"{npz}: diffuse, specular (F, 3), labels and observed (F,) disagree in shape")
+    known = {field.name for field in dataclasses.fields(EstimatorConfig)}
+    try:
+        config = EstimatorConfig(**{k: v for k, v in run["parameters"].items() if k in known})
+    except (TypeError, InputError) as exc:
+        raise RunError(f"{js}: parameters: {exc}") from None
+    est = Estimate(data["diffuse"], data["specular"], data[pseudo_key], data["labels"], data["observed"].astype(bool),
                    run["method"], config, {k: run[k] for k in ("timings",) if k in run},
-                   data["radiance_sh"] if "radiance_sh" in data else None)
+                   data.get("radiance_sh"))
+    if est.model.light == "radiance" and est.radiance_sh is None:
+        raise RunError(f"{npz}: key 'radiance_sh' missing (the {est.model.name!r} model solves for the radiance)")
     return est, run
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    return value

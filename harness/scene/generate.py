@@ -9,7 +9,9 @@ import time
 import numpy as np
 
 from estimator import backend
+from estimator.camera import Camera
 from estimator.data import TriangleMesh
+from estimator.raycast import RayCaster
 from reports.ground_truth import GroundTruth
 
 from harness.io.mesh import load_mesh_with_uv
@@ -93,17 +95,45 @@ def prepare(spec: SceneSpec) -> GeneratedScene:
     return GeneratedScene(spec, mesh, diffuse, specular, regions, build_illumination(spec.illumination, spec.seed))
 
 
-def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: str | None = None) -> dict:
+LDR_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tga", ".ppm")
+
+
+def cameras_inside(mesh: TriangleMesh, cameras: list[Camera]) -> list[int]:
+    """Indices of the cameras whose centre lies inside the (closed) mesh: the first face
+    a ray from the centre towards the mesh's centroid hits is seen from behind."""
+    centres = np.array([c.center for c in cameras])
+    target = mesh.vertices.mean(axis=0)
+    dirs = target[None] - centres
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-12)
+    face = RayCaster(mesh).first_hit_faces(centres, dirs)
+    hit = face >= 0
+    back = np.zeros(len(cameras), bool)
+    back[hit] = np.sum(mesh.face_normals[face[hit]] * dirs[hit], axis=1) > 0
+    return [int(i) for i in np.nonzero(back)[0]]
+
+
+def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: str | None = None,
+             log=None) -> dict:
     """Render a spec into a dataset folder, atomically.
 
     Returns a summary dict (paths, counts, seconds). Nothing is left at
-    ``out_dir`` if anything fails or the run is interrupted.
+    ``out_dir`` if anything fails or the run is interrupted. ``log`` (a callable)
+    receives warnings: cameras inside the mesh, a low-dynamic-range light probe.
     """
+    say = log or (lambda message: None)
     backend.set_variant(variant)
     t0 = time.perf_counter()
-    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+    probe = spec.illumination.file
+    if probe and os.path.splitext(probe)[1].lower() in LDR_EXTENSIONS:
+        say(f"warning: illumination.file {probe} is a low-dynamic-range image; a light probe should be HDR "
+            "(EXR or Radiance HDR): its bright light sources are clipped")
+    with atomic_directory(out_dir, overwrite=overwrite, inputs=spec.inputs(), kind="dataset") as tmp:
         scene = prepare(spec)
         train_cams, test_cams = make_cameras(spec.cameras), make_cameras(spec.cameras, test=True)
+        inside = cameras_inside(scene.mesh, train_cams + test_cams)
+        if inside:
+            say(f"warning: {len(inside)} of {len(train_cams) + len(test_cams)} cameras lie inside the mesh "
+                f"(cameras.distance {spec.cameras.distance}): their images show the inside")
         t1 = time.perf_counter()
         train = scene.render(train_cams, desc=f"{spec.name} train")
         test = scene.render(test_cams, desc=f"{spec.name} test")

@@ -7,13 +7,16 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import os
 import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
+from estimator.errors import InputError
 
-class SpecError(ValueError):
+
+class SpecError(InputError):
     """A scene spec that cannot be used; the message names the key or file."""
 
 
@@ -31,6 +34,8 @@ def _num(where: str, value, lo=None, hi=None, integer=False, lo_open=False) -> f
     ok_type = isinstance(value, int) if integer else isinstance(value, (int, float))
     if isinstance(value, bool) or not ok_type:
         raise SpecError(f"{where} must be {'an integer' if integer else 'a number'}, got {value!r}")
+    if not math.isfinite(value):
+        raise SpecError(f"{where} must be finite, got {value!r}")
     if lo is not None and (value <= lo if lo_open else value < lo):
         raise SpecError(f"{where} must be {'>' if lo_open else '>='} {lo}, got {value}")
     if hi is not None and value > hi:
@@ -44,6 +49,8 @@ def _vec(where: str, value, n=3, nonneg=False, nonzero=False) -> list[float]:
     if not isinstance(value, list) or len(value) != n or not all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
         raise SpecError(f"{where} must be a list of {n} numbers, got {value!r}")
+    if not all(math.isfinite(v) for v in value):
+        raise SpecError(f"{where} must be finite, got {value!r}")
     if nonneg and min(value) < 0:
         raise SpecError(f"{where} must be non-negative, got {value}")
     if nonzero and not any(value):
@@ -274,6 +281,35 @@ class SceneSpec:
     profiles: dict = field(default_factory=dict)
     path: str | None = None
 
+    def inputs(self) -> list[str]:
+        """The files this spec reads: the spec itself and its assets (mesh, textures, probe)."""
+        found = [self.path] if self.path else []
+
+        def walk(value):
+            if isinstance(value, dict):
+                for v in value.values():
+                    walk(v)
+            elif isinstance(value, list):
+                for v in value:
+                    walk(v)
+            elif isinstance(value, str) and os.path.isabs(value) and os.path.isfile(value):
+                found.append(value)
+
+        walk(dataclasses.asdict(self))
+        return sorted(set(found))
+
+
+def _check_finite(where: str, value) -> None:
+    """Every float anywhere in a raw spec must be finite (TOML allows nan and inf)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise SpecError(f"{where} must be finite, got {value!r}")
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _check_finite(f"{where}.{key}" if where else str(key), item)
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            _check_finite(f"{where}[{index}]", item)
+
 
 def _build(where: str, raw: dict, cls):
     _check_keys(where, raw, cls)
@@ -325,6 +361,8 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
     overrides : further dotted-key overrides, applied last.
     """
     _check_keys("spec", raw, SceneSpec)
+    _check_finite("", raw)
+    _check_finite("", overrides or {})
     if "name" not in raw or not isinstance(raw["name"], str) or not raw["name"]:
         raise SpecError("spec.name is missing (a non-empty string)")
     profiles = raw.get("profiles", {})
@@ -376,6 +414,10 @@ def load_spec(path: str | os.PathLike, profile: str | None = None,
             raw = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"{path} is not valid TOML: {exc}") from exc
+    except UnicodeDecodeError:
+        raise SpecError(f"{path} is not a text file (a scene spec is TOML)") from None
+    except OSError as exc:
+        raise SpecError(f"cannot read scene spec {path}: {exc.strerror or exc}") from None
     spec = parse_spec(raw, os.path.dirname(os.path.abspath(path)), profile, overrides)
     spec.path = os.path.abspath(path)
     return spec
