@@ -1,7 +1,8 @@
 """Parameters of the estimator, validated in one place."""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -89,6 +90,7 @@ class EstimatorConfig:
     variant: str | None = None
 
     def __post_init__(self):
+        self._check_types()
         checks = [
             (0 <= self.sh_order <= 30, "sh_order must lie in [0, 30]"),
             (self.directions >= 12, "directions must be >= 12"),
@@ -121,6 +123,28 @@ class EstimatorConfig:
             if np.any(np.abs(f) < 1e-6):
                 raise InputError(f"estimator config: the Phong filter of exponent {self.phong_exponent} vanishes "
                                  f"below degree {self.defilter_order}; lower defilter_order")
+
+    def _check_types(self) -> None:
+        """Each field has its default's type: int, float (an int is taken), bool or str
+        (``variant`` may be None); floats must be finite."""
+        for f in fields(self):
+            value, default = getattr(self, f.name), f.default
+            if f.name == "variant":
+                ok = value is None or isinstance(value, str)
+            elif isinstance(default, bool):
+                ok = isinstance(value, bool)
+            elif isinstance(default, int):
+                ok = isinstance(value, int) and not isinstance(value, bool)
+            elif isinstance(default, float):
+                ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+                if ok:
+                    object.__setattr__(self, f.name, float(value))
+            else:
+                ok = isinstance(value, type(default))
+            if not ok:
+                kind = ("a string or null" if f.name == "variant" else
+                        "a finite number" if isinstance(default, float) else type(default).__name__)
+                raise InputError(f"estimator config: {f.name} must be {kind}, got {value!r}")
 
     @property
     def lm_schedule(self) -> tuple[float, float, float, float]:

@@ -35,6 +35,18 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+def _interruption(exc: BaseException) -> type | None:
+    """Terminated or KeyboardInterrupt when ``exc`` is one or was caused by one (Dr.Jit
+    wraps exceptions raised inside its kernels' Python callbacks in a RuntimeError)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, (Terminated, KeyboardInterrupt)):
+            return type(exc)
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
@@ -339,8 +351,15 @@ def _add_estimator_flags(p) -> None:
     p.add_argument("--variant", choices=VARIANTS + ("auto",))
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage block), exit code 2, like every other input error."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="pseudolight", description=__doc__)
+    p = _Parser(prog="pseudolight", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("scenes", help="list the shipped scene specs")
@@ -416,19 +435,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a bad flag (2, one line already printed)
+        return int(exc.code or 0)
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)
     except InputError as exc:
         print(f"pseudolight: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("pseudolight: interrupted; no partial output was left", file=sys.stderr)
-        return 130
-    except Terminated:
-        print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
-        return 143
+    except BaseException as exc:
+        kind = _interruption(exc)
+        if kind is Terminated:
+            print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
+            return 143
+        if kind is KeyboardInterrupt:
+            print("pseudolight: interrupted; no partial output was left", file=sys.stderr)
+            return 130
+        raise
     finally:
         signal.signal(signal.SIGTERM, previous)
 

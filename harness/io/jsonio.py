@@ -41,14 +41,13 @@ def dump_json(path: str, value: dict) -> None:
 
 
 def load_json(path: str, what: str, error: type[InputError] = InputError) -> dict:
-    """A JSON object from ``path``. A missing, unreadable or malformed file, NaN tokens,
-    or a top level that is not an object raise ``error`` naming the file and ``what`` it is."""
-    def refuse_constant(token):
-        raise ValueError(f"the non-standard token {token}")
-
+    """A JSON object from ``path``. A missing, unreadable or malformed file, or a top level
+    that is not an object, raise ``error`` naming the file and ``what`` it is. NaN and
+    Infinity tokens are read (Python writes them): the readers validate values where
+    they matter and name the key."""
     try:
         with open(path) as f:
-            value = json.load(f, parse_constant=refuse_constant)
+            value = json.load(f)
     except FileNotFoundError:
         raise error(f"{path} not found ({what})") from None
     except (ValueError, UnicodeDecodeError) as exc:

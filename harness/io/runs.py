@@ -30,8 +30,17 @@ def estimator_settings(meta: dict, method: str | None = None, overrides: dict | 
                        ) -> tuple[str, EstimatorConfig]:
     """Method and config for a dataset: EstimatorConfig defaults <- the dataset's
     ``estimator_defaults`` (its scene's [estimator] table) <- ``method``/``overrides``."""
-    chosen = dict(meta.get("estimator_defaults") or {})
+    defaults = meta.get("estimator_defaults") or {}
+    if not isinstance(defaults, dict):
+        raise InputError(f"transforms.json estimator_defaults must be an object, got {defaults!r}")
+    chosen = dict(defaults)
     default_method = chosen.pop("method", None) or "bilinear-clustered"
+    if not isinstance(default_method, str):
+        raise InputError(f"transforms.json estimator_defaults.method must be a string, got {default_method!r}")
+    known = {f.name for f in dataclasses.fields(EstimatorConfig)}
+    unknown = sorted(set(chosen) - known)
+    if unknown:
+        raise InputError(f"transforms.json estimator_defaults: unknown key(s) {', '.join(unknown)}")
     chosen.update(overrides or {})
     return method or default_method, EstimatorConfig(**chosen)
 

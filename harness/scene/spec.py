@@ -59,7 +59,7 @@ def _vec(where: str, value, n=3, nonneg=False, nonzero=False) -> list[float]:
 
 
 def _choice(where: str, value, options) -> str:
-    if value not in options:
+    if not isinstance(value, str) or value not in options:
         raise SpecError(f"{where} must be one of {', '.join(map(repr, options))}, got {value!r}")
     return value
 
@@ -257,6 +257,8 @@ class RenderSpec:
         _num("render.spp", self.spp, 1, 65536, integer=True)
         _choice("render.integrator", self.integrator, ("auto", "direct", "path"))
         _num("render.max_depth", self.max_depth, 2, 64, integer=True)
+        if not isinstance(self.half, bool):
+            raise SpecError(f"render.half must be true or false, got {self.half!r}")
         if self.integrator == "direct" and not illumination.is_delta:
             raise SpecError(f"render.integrator = 'direct' needs delta lights; "
                             f"illumination.type = {illumination.type!r} needs 'path'")
@@ -311,6 +313,24 @@ def _check_finite(where: str, value) -> None:
             _check_finite(f"{where}[{index}]", item)
 
 
+def _text(where: str, value) -> str:
+    if not isinstance(value, str):
+        raise SpecError(f"{where} must be a string, got {value!r}")
+    return value
+
+
+def _table(where: str, value) -> dict:
+    if not isinstance(value, dict):
+        raise SpecError(f"{where} must be a table, got {value!r}")
+    return dict(value)
+
+
+def _list(where: str, value) -> list:
+    if not isinstance(value, list):
+        raise SpecError(f"{where} must be a list of tables, got {value!r}")
+    return value
+
+
 def _build(where: str, raw: dict, cls):
     _check_keys(where, raw, cls)
     return cls(**raw)
@@ -327,7 +347,7 @@ def _estimator_defaults(raw: dict) -> dict:
     unknown = sorted(set(raw) - allowed)
     if unknown:
         raise SpecError(f"unknown key(s) {', '.join('estimator.' + k for k in unknown)}")
-    if "method" in raw and raw["method"] not in REGISTRY:
+    if "method" in raw and (not isinstance(raw["method"], str) or raw["method"] not in REGISTRY):
         raise SpecError(f"estimator.method {raw['method']!r} is not a registered method ({', '.join(REGISTRY)})")
     try:
         EstimatorConfig(**{k: v for k, v in raw.items() if k != "method"})
@@ -372,18 +392,20 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
         raw = apply_overrides(raw, profiles[profile])
     if overrides:
         raw = apply_overrides(raw, overrides)
-    mat = dict(raw.get("material", {}))
+    mat = _table("material", raw.get("material", {}))
     _check_keys("material", mat, MaterialSpec)
     for key in ("diffuse", "specular"):
         if key in mat:
             mat[key] = _build(f"material.{key}", mat[key], AlbedoSpec)
-    mat["regions"] = [_build(f"material.regions[{i}]", r, RegionSpec) for i, r in enumerate(mat.get("regions", []))]
-    ill = dict(raw.get("illumination", {}))
+    mat["regions"] = [_build(f"material.regions[{i}]", r, RegionSpec)
+                      for i, r in enumerate(_list("material.regions", mat.get("regions", [])))]
+    ill = _table("illumination", raw.get("illumination", {}))
     _check_keys("illumination", ill, IlluminationSpec)
-    ill["lights"] = [_build(f"illumination.lights[{i}]", r, LightSpec) for i, r in enumerate(ill.get("lights", []))]
+    ill["lights"] = [_build(f"illumination.lights[{i}]", r, LightSpec)
+                     for i, r in enumerate(_list("illumination.lights", ill.get("lights", [])))]
     spec = SceneSpec(
         name=raw["name"],
-        description=raw.get("description", ""),
+        description=_text("spec.description", raw.get("description", "")),
         seed=_num("spec.seed", raw.get("seed", 0), 0, integer=True),
         geometry=_build("geometry", raw.get("geometry", {}), GeometrySpec),
         material=MaterialSpec(**mat),

@@ -1,0 +1,363 @@
+"""Every failure the hostile-input run found, reproduced: exit code, one line naming the
+file, key or flag, no output left behind, and no input changed.
+
+Each case runs the real command line on the micro scene (80 faces, 6 views of 24x24).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from harness.cli.main import main
+from harness.io.atomic import MARKER
+
+MICRO = os.path.join(os.path.dirname(os.path.dirname(__file__)), "fixtures", "micro.toml")
+
+
+def snapshot(*paths) -> dict:
+    """{path: sha256} of every file under the given files and folders."""
+    out = {}
+    for root in paths:
+        root = str(root)
+        if os.path.isfile(root):
+            out[root] = hashlib.sha256(open(root, "rb").read()).hexdigest()
+            continue
+        for folder, _, files in os.walk(root):
+            for name in files:
+                path = os.path.join(folder, name)
+                out[path] = hashlib.sha256(open(path, "rb").read()).hexdigest()
+    return out
+
+
+def expect_error(capsys, argv, *needles, inputs=(), absent=(), code=2):
+    """Run the CLI; assert the exit code, exactly one error line holding every needle,
+    no traceback, no '.partial' name, unchanged inputs and absent outputs."""
+    before = snapshot(*inputs)
+    assert main([str(a) for a in argv]) == code
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("pseudolight")]
+    assert len(lines) == 1, err
+    assert "Traceback" not in err and ".partial" not in lines[0], err
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    assert snapshot(*inputs) == before
+    for path in absent:
+        assert not os.path.exists(path), path
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def micro(tmp_path_factory):
+    """A micro dataset, a run of it and a report of the run (no Mitsuba cross-check)."""
+    root = tmp_path_factory.mktemp("micro")
+    ds, run, rep = root / "dataset", root / "run", root / "report"
+    assert main(["generate", MICRO, "-o", str(ds)]) == 0
+    assert main(["estimate", str(ds), "-o", str(run)]) == 0
+    assert main(["report", str(run), "-o", str(rep), "--no-mitsuba"]) == 0
+    return ds, run, rep
+
+
+@pytest.fixture
+def copy(micro, tmp_path):
+    """A fresh copy of the micro dataset, run and report for a case that mutates them."""
+    ds, run, rep = (tmp_path / name for name in ("dataset", "run", "report"))
+    for src, dst in zip(micro, (ds, run, rep)):
+        shutil.copytree(src, dst)
+    meta = json.load(open(run / "run.json"))
+    meta["dataset"] = str(ds)
+    json.dump(meta, open(run / "run.json", "w"))
+    return ds, run, rep
+
+
+# ---------------------------------------------------------------- data loss
+
+def test_overwrite_never_destroys_an_input(copy, tmp_path, capsys):
+    ds, run, rep = copy
+    expect_error(capsys, ["estimate", ds, "-o", ds, "--overwrite"], "is the input", str(ds), inputs=[ds])
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path, "--overwrite"], "contains the input", inputs=[ds])
+    expect_error(capsys, ["report", run, "-o", run, "--overwrite", "--no-mitsuba"], "is the input", inputs=[run, ds])
+    spec_dir = tmp_path / "specs"
+    spec_dir.mkdir()
+    shutil.copy(MICRO, spec_dir / "micro.toml")
+    (spec_dir / "notes.txt").write_text("keep me")
+    expect_error(capsys, ["generate", spec_dir / "micro.toml", "-o", spec_dir, "--overwrite"], "contains the input",
+                 inputs=[spec_dir])
+
+
+def test_overwrite_replaces_only_what_pseudolight_wrote(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    foreign = tmp_path / "photos"
+    foreign.mkdir()
+    (foreign / "holiday.jpg").write_bytes(b"\xff\xd8 not really")
+    expect_error(capsys, ["estimate", ds, "-o", foreign, "--overwrite"], "not written by pseudolight", str(foreign),
+                 inputs=[ds, foreign])
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["estimate", str(ds), "-o", str(empty), "--overwrite"]) == 0
+    assert (empty / MARKER).is_file()
+    assert main(["estimate", str(ds), "-o", str(empty), "--overwrite"]) == 0   # its own output: replaced
+    capsys.readouterr()
+
+
+# ------------------------------------------------------------ silent garbage
+
+def test_non_finite_estimate_is_refused_and_nan_is_a_regression(copy, capsys):
+    ds, run, rep = copy
+    data = dict(np.load(run / "estimate.npz"))
+    data["pseudo_sh"][3, 1] = np.nan
+    np.savez(run / "estimate.npz", **data)
+    out = run.parent / "rep2"
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "estimate.npz", "pseudo_sh", "NaN",
+                 inputs=[run, ds], absent=[out])
+
+    from reports.regression import check
+
+    rows = check({"illumination": {"relative_l2": float("nan")}},
+                 {"metrics": {"illumination.relative_l2": 0.1}})
+    assert rows[0]["status"] == "missing" and rows[0]["current"] is None
+
+
+def test_metrics_json_is_strict(tmp_path):
+    from harness.io.jsonio import dump_json
+
+    dump_json(str(tmp_path / "m.json"), {"a": {"b": float("nan")}, "c": [1.0, float("inf")]})
+    text = (tmp_path / "m.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    loaded = json.loads(text)
+    assert loaded["a"]["b"] is None and loaded["c"][1] is None
+    assert set(loaded["null_reasons"]) == {"a.b", "c[1]"}
+
+
+def test_report_against_another_dataset_is_refused(copy, tmp_path, capsys):
+    ds, run, _ = copy
+    other = tmp_path / "other"
+    shutil.copytree(ds, other)
+    from harness.io.exr import read_exr, write_exr
+
+    image = read_exr(other / "images" / "train_000.exr")
+    image[..., :3] *= 2.0
+    write_exr(other / "images" / "train_000.exr", image)
+    out = tmp_path / "rep"
+    expect_error(capsys, ["report", run, "--dataset", other, "-o", out, "--no-mitsuba"], "images", str(ds),
+                 str(other), inputs=[run, other], absent=[out])
+
+
+def test_nan_ground_truth_is_refused(copy, capsys):
+    ds, run, _ = copy
+    mats = dict(np.load(ds / "ground_truth" / "materials.npz"))
+    mats["diffuse"][:10] = np.nan
+    np.savez(ds / "ground_truth" / "materials.npz", **mats)
+    out = run.parent / "rep2"
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "materials.npz", "diffuse", "10 rows",
+                 inputs=[run, ds], absent=[out])
+
+
+@pytest.mark.parametrize("edit, key", [
+    ('specular = { value = [0.2, 0.2, 0.2], scale = nan }', "material.specular.scale"),
+    ('exponent = nan', "material.exponent"),
+    ('exponent = inf', "material.exponent"),
+])
+def test_non_finite_spec_values_name_the_key(tmp_path, capsys, edit, key):
+    text = open(MICRO).read()
+    target = "exponent = 10.0" if edit.startswith("exponent") else 'specular = { value = [0.2, 0.2, 0.2] }'
+    spec = tmp_path / "bad.toml"
+    spec.write_text(text.replace(target, edit))
+    expect_error(capsys, ["generate", spec, "-o", tmp_path / "out"], key, "finite", inputs=[spec],
+                 absent=[tmp_path / "out"])
+
+
+def test_negative_pixels_are_dropped_and_reported(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    from harness.io.exr import read_exr, write_exr
+
+    image = read_exr(ds / "images" / "train_002.exr")
+    image[4:14, 4:14, :3] = -0.5
+    write_exr(ds / "images" / "train_002.exr", image)
+    assert main(["estimate", str(ds), "-o", str(tmp_path / "r")]) == 0
+    err = capsys.readouterr().err
+    warning = [line for line in err.splitlines() if line.startswith("warning:")]
+    assert len(warning) == 1 and "train_002" in warning[0] and "negative" in warning[0]
+    assert int(warning[0].split(": ")[2].split()[0]) > 0
+    meta = json.load(open(tmp_path / "r" / "run.json"))
+    assert list(meta["rejected_pixels"]) == ["images/train_002.exr"]
+
+
+# ----------------------------------------------- one line, exit 2, names it
+
+def test_malformed_transforms_json(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    t = json.load(open(ds / "transforms.json"))
+    out = tmp_path / "r"
+    for value, needles in [
+        ([1, 2, 3], ["transforms.json", "JSON object"]),
+        ({**t, "format_version": 99}, ["format_version 99"]),
+        ({**t, "frames": [{**t["frames"][0], "transform_matrix": "eye(4)"}]}, ["frames[0]", "4x4 array of numbers"]),
+        ({**t, "frames": [{**t["frames"][0], "transform_matrix": [[float("nan")] * 4] * 4}]}, ["frames[0]", "NaN"]),
+        ({**t, "frames": [{**t["frames"][0], "transform_matrix": np.diag([1, 1, 0, 1.0]).tolist()}]},
+         ["frames[0]", "not a rigid"]),
+        ({**t, "fl_x": "wide"}, ["fl_x", "finite number"]),
+    ]:
+        (ds / "transforms.json").write_text(json.dumps(value))
+        expect_error(capsys, ["estimate", ds, "-o", out], *needles, inputs=[ds], absent=[out])
+
+
+def test_missing_ground_truth_keys_and_files(copy, capsys):
+    ds, run, _ = copy
+    gt = ds / "ground_truth"
+    out = run.parent / "rep2"
+    mats = dict(np.load(gt / "materials.npz"))
+    np.savez(gt / "materials.npz", diffuse=mats["diffuse"])
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "materials.npz", "'specular'", inputs=[run, ds],
+                 absent=[out])
+    (gt / "materials.npz").write_text("diffuse,specular\n1,2\n")
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "materials.npz", "not a .npz archive",
+                 inputs=[run, ds], absent=[out])
+    np.savez(gt / "materials.npz", **mats)
+    info = json.load(open(gt / "illumination.json"))
+    del info["brdf"]
+    json.dump(info, open(gt / "illumination.json", "w"))
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "illumination.json", "'brdf'", inputs=[run, ds],
+                 absent=[out])
+    os.remove(gt / "illumination.json")
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "illumination.json", "not found",
+                 inputs=[run, ds], absent=[out])
+    # estimation never reads ground truth: an incomplete ground_truth/ does not matter to it
+    assert main(["estimate", str(ds), "-o", str(run.parent / "r2")]) == 0
+    capsys.readouterr()
+
+
+def test_malformed_baseline_metrics_and_run_json(copy, tmp_path, capsys):
+    ds, run, rep = copy
+    out = tmp_path / "rep2"
+    bad = tmp_path / "baseline.json"
+    bad.write_text(json.dumps({"metrics": {"illumination.relative_l2": "low"}}))
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba", "--baseline", bad], str(bad),
+                 "illumination.relative_l2", inputs=[run, ds, bad], absent=[out])
+    bad.write_text("{not json")
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba", "--baseline", bad], str(bad), "not valid JSON",
+                 inputs=[run, ds, bad], absent=[out])
+    (rep / "metrics.json").write_text("[1, 2")
+    expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", "not valid JSON", inputs=[rep], absent=[out])
+    (run / "run.json").write_text("NaN")
+    expect_error(capsys, ["render", run, "-o", out], "run.json", inputs=[run, ds], absent=[out])
+
+
+def test_bad_spec_files_name_the_file(tmp_path, capsys):
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(bytes(range(256)))
+    expect_error(capsys, ["generate", binary, "-o", tmp_path / "o"], str(binary), inputs=[binary])
+    probe = tmp_path / "ldr.toml"
+    png = tmp_path / "probe.png"
+    import mitsuba as mi
+
+    mi.Bitmap(np.full((16, 32, 3), 0.5, np.float32)).convert(
+        mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(str(png))
+    probe.write_text(open(MICRO).read().replace(
+        '[illumination]\ntype = "directional"\nlights = [{ to_light = [0.4, 0.8, 0.45], irradiance = [3.0, 3.0, 3.0] }]',
+        '[illumination]\ntype = "probe-clustered"\nfile = "probe.png"\ncount = 4'))
+    assert main(["generate", str(probe), "-o", str(tmp_path / "ldr")]) == 0
+    assert "low-dynamic-range" in capsys.readouterr().err
+
+
+def test_black_or_negated_images_name_the_cause(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    from harness.io.exr import read_exr, write_exr
+
+    for name in os.listdir(ds / "images"):
+        image = read_exr(ds / "images" / name)
+        image[..., :3] = 0.0
+        write_exr(ds / "images" / name, image)
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "black or negative", inputs=[ds],
+                 absent=[tmp_path / "r"])
+
+
+def test_degenerate_mesh_and_flags(copy, tmp_path, capsys):
+    ds, run, _ = copy
+    import trimesh
+
+    mesh = trimesh.load(ds / "mesh.ply", process=False)
+    flat = trimesh.Trimesh(np.zeros_like(mesh.vertices), mesh.faces, process=False)
+    flat.export(ds / "mesh.ply")
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "mesh.ply", "no face with non-zero area",
+                 inputs=[ds], absent=[tmp_path / "r"])
+    expect_error(capsys, ["render", run, "-o", tmp_path / "p", "--rotate-illumination", "y", "nan"],
+                 "--rotate-illumination", inputs=[run], absent=[tmp_path / "p"])
+    expect_error(capsys, ["generate", MICRO, "-o", tmp_path / "g", "--resolution", "0"], "--resolution",
+                 absent=[tmp_path / "g"])
+
+
+def test_filesystem_errors_are_one_line(copy, tmp_path, capsys, monkeypatch):
+    ds, _, _ = copy
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    expect_error(capsys, ["estimate", ds, "-o", blocker / "sub"], "is a file", inputs=[ds])
+    expect_error(capsys, ["estimate", ds, "-o", "/proc/pseudolight/run"], "/proc/pseudolight/run", inputs=[ds])
+    import harness.io.runs as runs
+
+    def disk_full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(runs.np, "savez", disk_full)
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "No space left", str(tmp_path / "r"),
+                 inputs=[ds], absent=[tmp_path / "r"])
+    assert not [n for n in os.listdir(tmp_path) if ".partial" in n]
+
+
+def test_cameras_inside_the_mesh_warn(tmp_path, capsys):
+    spec = tmp_path / "inside.toml"
+    spec.write_text(open(MICRO).read().replace("distance = 4.0", "distance = 0.5"))
+    assert main(["generate", str(spec), "-o", str(tmp_path / "d")]) == 0
+    assert "7 of 7 cameras lie inside the mesh" in capsys.readouterr().err
+
+
+def test_stale_partial_folders_are_removed(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".r.partial-{dead.pid}-abcd"
+    stale.mkdir()
+    (stale / "estimate.npz").write_bytes(b"half")
+    assert main(["estimate", str(ds), "-o", str(tmp_path / "r")]) == 0
+    assert not stale.exists()
+    capsys.readouterr()
+
+
+def test_sigterm_leaves_no_partial_output(tmp_path):
+    spec = tmp_path / "slow.toml"
+    spec.write_text(open(MICRO).read().replace("count = 6", "count = 400").replace("width = 24", "width = 64")
+                    .replace("height = 24", "height = 64"))
+    out = tmp_path / "d"
+    proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "generate", str(spec), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
+    deadline = time.time() + 60
+    while time.time() < deadline and not [n for n in os.listdir(tmp_path) if ".partial" in n]:
+        time.sleep(0.1)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert "terminated" in err and "Traceback" not in err
+    assert not out.exists() and not [n for n in os.listdir(tmp_path) if ".partial" in n]
+
+
+def test_internal_errors_keep_their_traceback(copy, tmp_path, monkeypatch):
+    ds, _, _ = copy
+    import estimator.methods as methods
+
+    def bug(*args, **kwargs):
+        raise ValueError("a bug, not bad input")
+
+    monkeypatch.setattr(methods, "estimate", bug)
+    with pytest.raises(ValueError, match="a bug"):
+        main(["estimate", str(ds), "-o", str(tmp_path / "r")])
+    assert not (tmp_path / "r").exists()
