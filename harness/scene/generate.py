@@ -34,6 +34,8 @@ def build_mesh(spec: SceneSpec) -> tuple[TriangleMesh, np.ndarray | None]:
         return geometry.icosphere(g.subdivisions, g.radius), None
     if g.type == "blob":
         return geometry.blob(g.subdivisions, g.radius, g.lobes, g.depth), None
+    if g.type == "bumpy":
+        return geometry.bumpy(g.subdivisions, g.radius, g.lobes, g.depth, g.bumps, g.frequency, spec.seed), None
     return load_mesh_with_uv(g.file)
 
 
@@ -74,8 +76,7 @@ class GeneratedScene:
 
     def ground_truth(self) -> GroundTruth:
         return GroundTruth(self.diffuse, self.specular, self.illumination.sh(GROUND_TRUTH_SH_ORDER),
-                           {"model": "phong", "exponent": float(self.spec.material.exponent)},
-                           self.illumination.to_json(), self.regions)
+                           material_dict(self.spec.material), self.illumination.to_json(), self.regions)
 
     def render(self, cameras, illumination: Illumination | None = None, desc: str = "render") -> list[np.ndarray]:
         """RGBA images (H, W, 4) of ``cameras``, optionally under another illumination."""
@@ -83,15 +84,48 @@ class GeneratedScene:
             return []
         r = self.spec.render
         light = illumination or self.illumination
-        scene = build_scene(self.mesh, self.diffuse, self.specular, self.spec.material.exponent, light,
+        scene = build_scene(self.mesh, self.diffuse, self.specular, material_dict(self.spec.material), light,
                             cameras[0], r.spp, r.resolved_integrator(self.spec.illumination), r.max_depth)
         return render_views(scene, cameras, r.spp, self.spec.seed, desc)
 
 
+def material_dict(m) -> dict:
+    """The BRDF of a material spec as stored in ground_truth/illumination.json (``brdf``).
+
+    ``exponent`` is the Phong exponent whose lobe filters the true radiance into the
+    pseudo illumination the reports compare with: the spec's for Phong; for Mitsuba's
+    ``roughplastic`` the Phong exponent of the same Beckmann width, 2 / alpha^2 - 2;
+    10000 (a mirror: the filter is 1 to 0.6 % at order 10) for ``plastic`` and ``diffuse``.
+    """
+    if m.model == "phong":
+        return {"model": "phong", "exponent": float(m.exponent)}
+    if m.model == "diffuse":
+        return {"model": "diffuse", "exponent": 10000.0}
+    out = {"model": m.model, "int_ior": float(m.int_ior), "exponent": 10000.0}
+    if m.model == "roughplastic":
+        out.update(alpha=float(m.alpha), distribution=m.distribution, exponent=float(2.0 / m.alpha ** 2 - 2.0))
+    return out
+
+
+def fresnel_normal(ior: float) -> float:
+    """Fresnel reflectance of a dielectric at normal incidence, ((n - 1) / (n + 1))^2."""
+    return ((ior - 1.0) / (ior + 1.0)) ** 2
+
+
 def prepare(spec: SceneSpec) -> GeneratedScene:
-    """Geometry, materials and illumination of a spec (no rendering)."""
+    """Geometry, materials and illumination of a spec (no rendering).
+
+    For Mitsuba's own materials the specular albedo is not a parameter: the ground
+    truth records the coating's Fresnel reflectance at normal incidence for
+    ``plastic``/``roughplastic`` and 0 for ``diffuse``.
+    """
     mesh, uv = build_mesh(spec)
     diffuse, specular, regions = build_materials(mesh, spec, uv)
+    m = spec.material
+    if m.model in ("plastic", "roughplastic"):
+        specular = np.full_like(diffuse, fresnel_normal(m.int_ior))
+    elif m.model == "diffuse":
+        specular = np.zeros_like(diffuse)
     return GeneratedScene(spec, mesh, diffuse, specular, regions, build_illumination(spec.illumination, spec.seed))
 
 

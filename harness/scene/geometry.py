@@ -31,3 +31,23 @@ def blob(subdivisions: int, radius: float = 1.0, lobes: int = 4, depth: float = 
     phi = np.arctan2(d[:, 0], -d[:, 2])
     r = radius * (1.0 + depth * np.cos(lobes * phi) * sin2) * (1.0 - 0.15 * (2 * cos_t ** 2 - 1))
     return TriangleMesh(d * r[:, None], np.asarray(s.faces))
+
+
+def bumpy(subdivisions: int, radius: float = 1.0, lobes: int = 4, depth: float = 0.3, bumps: float = 0.08,
+          frequency: int = 6, seed: int = 0) -> TriangleMesh:
+    """The :func:`blob` with seeded random bumps: concavities of many sizes that shadow
+    themselves and reflect light onto each other.
+
+    The blob's radius is multiplied by 1 + ``bumps`` x b(d), b a random combination of
+    real SH of degrees 3 to ``frequency`` (seeded) scaled to unit RMS over the sphere.
+    """
+    from estimator import sh
+
+    base = blob(subdivisions, radius, lobes, depth)
+    d = base.vertices / np.linalg.norm(base.vertices, axis=1, keepdims=True)
+    rng = np.random.default_rng(seed)
+    coeffs = rng.standard_normal(sh.num_coeffs(frequency))
+    coeffs[: sh.num_coeffs(2)] = 0.0
+    field = sh.basis(frequency, d) @ coeffs
+    field /= max(float(np.sqrt(np.mean(field ** 2))), 1e-12)
+    return TriangleMesh(base.vertices * (1.0 + bumps * field)[:, None], base.faces)

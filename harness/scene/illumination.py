@@ -132,13 +132,13 @@ def build_illumination(spec: IlluminationSpec, seed: int = 0) -> Illumination:
         return Illumination("sunsky", sunsky={
             "to_sun": (to_sun / np.linalg.norm(to_sun)).tolist(), "turbidity": spec.turbidity,
             "ground_albedo": spec.ground_albedo, "sun_scale": spec.sun_scale, "sky_scale": spec.sky_scale,
-            "scale": s})
+            "scale": s}, rotation=sh.axis_angle_matrix("y", spec.rotation))
     probe = s * read_linear_rgb(spec.file).astype(np.float64)
     if spec.type == "probe-clustered":
         d, e = cluster_probe(probe, spec.count, white=spec.white, seed=seed)
         return Illumination("directional", to_light=d, irradiance=e)
     latlong.directions(*probe.shape[:2])  # validates the map size
-    return Illumination("envmap", envmap=probe)
+    return Illumination("envmap", envmap=probe, rotation=sh.axis_angle_matrix("y", spec.rotation))
 
 
 # Mitsuba's sunsky frame is Z-up; this turns its local +Z to world +Y.

@@ -38,6 +38,6 @@ def render_truth(dataset: Dataset, cameras: list[Camera], rotation: np.ndarray |
     render = spec.get("render", {})
     spp = spp or int(dataset.meta.get("spp", render.get("spp", 16)))
     integrator = "direct" if light.is_delta else "path"
-    scene = build_scene(dataset.data.mesh, gt.diffuse, gt.specular, gt.brdf["exponent"], light, cameras[0], spp,
+    scene = build_scene(dataset.data.mesh, gt.diffuse, gt.specular, gt.brdf, light, cameras[0], spp,
                         integrator, int(render.get("max_depth", 6)))
     return render_views(scene, cameras, spp, int(dataset.meta.get("seed", 0)) + 1, desc="ground truth")

@@ -46,7 +46,75 @@ def make_cameras(spec: CameraSpec, test: bool = False) -> list[Camera]:
             for p in camera_positions(spec, test)]
 
 
-def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, exponent: float | None,
+def bsdf_dict(material: float | dict | None) -> dict:
+    """The Mitsuba BSDF of a material, its albedos read from the mesh's face attributes.
+
+    ``material``: a Phong exponent (float), None (the diffuse + mirror BSDF), or a
+    ground-truth BRDF dict (``{'model': 'phong'|'diffuse'|'plastic'|'roughplastic', ...}``,
+    see :func:`harness.scene.generate.material_dict`). Mitsuba's own ``diffuse``,
+    ``plastic`` and ``roughplastic`` take the per-face diffuse albedo; their specular
+    part is the dielectric coating's.
+    """
+    diffuse = {"type": "mesh_attribute", "name": "face_diffuse"}
+    atlas = {"type": "bitmap", "filename": "", "filter_type": "nearest", "wrap_mode": "clamp", "raw": True}
+    textures = {"diffuse_reflectance": diffuse,
+                "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular"}}
+    if material is None:
+        return {"type": plugins.DIFFUSE_MIRROR, **textures}
+    if not isinstance(material, dict):
+        return {"type": plugins.PHONG, "exponent": float(material), **textures}
+    model = material["model"]
+    if model == "phong":
+        return {"type": plugins.PHONG, "exponent": float(material["exponent"]), **textures}
+    # Mitsuba's plastic needs the texture's mean (mesh_attribute has none): per-face albedo
+    # comes from a one-texel-per-face atlas instead (see face_atlas)
+    if model == "diffuse":
+        return {"type": "diffuse", "reflectance": atlas}
+    if model == "plastic":
+        return {"type": "plastic", "diffuse_reflectance": atlas, "int_ior": float(material["int_ior"])}
+    if model == "roughplastic":
+        return {"type": "roughplastic", "diffuse_reflectance": atlas, "int_ior": float(material["int_ior"]),
+                "alpha": float(material["alpha"]), "distribution": material["distribution"]}
+    raise ValueError(f"unknown material model {model!r}")
+
+
+def face_atlas(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One texel per face: (image (n, n, C) float32, corner UVs (F, 3, 2)) with n = ceil(sqrt(F)).
+
+    Face i's texel is at row i // n, column i % n; its three corners map to a small
+    triangle inside that texel, so nearest-neighbour lookup gives exactly the face's value.
+    """
+    f = len(values)
+    n = max(int(np.ceil(np.sqrt(f))), 1)
+    image = np.zeros((n * n, values.shape[1]), np.float32)
+    image[:f] = values
+    index = np.arange(f)
+    centre = np.stack([(index % n + 0.5) / n, (index // n + 0.5) / n], axis=1)
+    offsets = np.array([[-0.2, -0.2], [0.2, -0.2], [0.0, 0.2]]) / n
+    return image.reshape(n, n, -1), centre[:, None, :] + offsets[None]
+
+
+def _atlas_mesh(mi, mesh: TriangleMesh, diffuse: np.ndarray, bsdf: dict):
+    """A mesh with unshared vertices (face i = vertices 3i..3i+2) carrying per-face UVs,
+    and the BSDF reading its diffuse albedo from the face atlas."""
+    image, uv = face_atlas(np.asarray(diffuse, np.float32))
+    key = "reflectance" if bsdf["type"] == "diffuse" else "diffuse_reflectance"
+    bitmap = dict(bsdf[key])
+    del bitmap["filename"]
+    bsdf = {**bsdf, key: {**bitmap, "bitmap": mi.Bitmap(image)}}
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf)
+    f = mesh.num_faces
+    m = mi.Mesh("object", 3 * f, f, has_vertex_normals=False, has_vertex_texcoords=True, props=props)
+    params = mi.traverse(m)
+    params["vertex_positions"] = mi.Float(mesh.corners.astype(np.float32).ravel())
+    params["faces"] = mi.UInt32(np.arange(3 * f, dtype=np.uint32))
+    params["vertex_texcoords"] = mi.Float(uv.astype(np.float32).ravel())
+    params.update()
+    return m
+
+
+def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, material: float | dict | None,
                 illumination: Illumination, camera: Camera, spp: int, integrator: str = "direct",
                 max_depth: int = 6):
     """A Mitsuba scene: the mesh with per-face albedos, the lights, one sensor.
@@ -54,23 +122,21 @@ def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, e
     Parameters
     ----------
     diffuse, specular : (F, 3) per-face linear albedo.
-    exponent : Phong exponent of the ``pseudolight_phong`` BSDF, or None for the
-        diffuse + perfect-mirror BSDF ``pseudolight_diffuse_mirror`` (the estimator's model).
+    material : see :func:`bsdf_dict` (a Phong exponent, None for the estimator's
+        diffuse + mirror model, or a ground-truth BRDF dict).
     integrator : 'direct' (deterministic loop over delta lights) or 'path'.
     """
     mi = backend.set_variant()
     plugins.register_all()
-    textures = {"diffuse_reflectance": {"type": "mesh_attribute", "name": "face_diffuse"},
-                "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular"}}
-    if exponent is None:
-        bsdf = {"type": plugins.DIFFUSE_MIRROR, **textures}
+    bsdf = bsdf_dict(material)
+    if bsdf["type"] in ("diffuse", "plastic", "roughplastic"):
+        m = _atlas_mesh(mi, mesh, diffuse, bsdf)
     else:
-        bsdf = {"type": plugins.PHONG, "exponent": float(exponent), **textures}
-    props = mi.Properties()
-    props["bsdf"] = mi.load_dict(bsdf)
-    m = mitsuba_mesh(mesh, "object", props=props)
-    m.add_attribute("face_diffuse", 3, mi.Float(np.asarray(diffuse, np.float32).ravel()))
-    m.add_attribute("face_specular", 3, mi.Float(np.asarray(specular, np.float32).ravel()))
+        props = mi.Properties()
+        props["bsdf"] = mi.load_dict(bsdf)
+        m = mitsuba_mesh(mesh, "object", props=props)
+        m.add_attribute("face_diffuse", 3, mi.Float(np.asarray(diffuse, np.float32).ravel()))
+        m.add_attribute("face_specular", 3, mi.Float(np.asarray(specular, np.float32).ravel()))
     if integrator == "direct":
         if not illumination.is_delta:
             raise ValueError("the direct integrator needs delta lights; use 'path' for an envmap")

@@ -80,10 +80,14 @@ class GeometrySpec:
     radius: float = 1.0
     lobes: int = 4
     depth: float = 0.3
+    bumps: float = 0.08
+    frequency: int = 6
     file: str | None = None
 
     def validate(self, base_dir: str) -> None:
-        _choice("geometry.type", self.type, ("icosphere", "blob", "mesh"))
+        _choice("geometry.type", self.type, ("icosphere", "blob", "bumpy", "mesh"))
+        _num("geometry.bumps", self.bumps, 0, 0.5)
+        _num("geometry.frequency", self.frequency, 3, 16, integer=True)
         _num("geometry.subdivisions", self.subdivisions, 0, 7, integer=True)
         _num("geometry.radius", self.radius, 0, lo_open=True)
         _num("geometry.lobes", self.lobes, 1, 16, integer=True)
@@ -134,17 +138,26 @@ class RegionSpec:
                 raise SpecError(f"{where}.ranges[{i}] must satisfy -1 <= lo <= hi <= 1, got {[lo, hi]}")
 
 
+MATERIAL_MODELS = ("phong", "diffuse", "plastic", "roughplastic")
+
+
 @dataclass
 class MaterialSpec:
     model: str = "phong"
     exponent: float = 10.0
+    int_ior: float = 1.49
+    alpha: float = 0.1
+    distribution: str = "beckmann"
     diffuse: AlbedoSpec | None = None
     specular: AlbedoSpec | None = None
     regions: list[RegionSpec] = field(default_factory=list)
 
     def validate(self, base_dir: str) -> None:
-        _choice("material.model", self.model, ("phong",))
+        _choice("material.model", self.model, MATERIAL_MODELS)
         _num("material.exponent", self.exponent, 0, 10000, lo_open=True)
+        _num("material.int_ior", self.int_ior, 1.0, 4.0, lo_open=True)
+        _num("material.alpha", self.alpha, 0.01, 1.0)
+        _choice("material.distribution", self.distribution, ("beckmann", "ggx"))
         if self.regions:
             if self.diffuse is not None or self.specular is not None:
                 raise SpecError("material.regions cannot be combined with material.diffuse/specular")
@@ -182,6 +195,7 @@ class IlluminationSpec:
     ground_albedo: float = 0.3
     sun_scale: float = 1.0
     sky_scale: float = 1.0
+    rotation: float = 0.0
 
     def validate(self, base_dir: str) -> None:
         kinds = ("directional", "point", "probe-clustered", "envmap", "sunsky")
@@ -218,6 +232,9 @@ class IlluminationSpec:
         _num("illumination.ground_albedo", self.ground_albedo, 0, 1)
         _num("illumination.sun_scale", self.sun_scale, 0)
         _num("illumination.sky_scale", self.sky_scale, 0)
+        _num("illumination.rotation", self.rotation, -360, 360)
+        if self.rotation and self.type not in ("envmap", "sunsky"):
+            raise SpecError(f"illumination.rotation turns an envmap or sunsky, not {self.type!r} lights")
 
     @property
     def is_delta(self) -> bool:
