@@ -59,6 +59,19 @@ class EstimatorConfig:
         divisor after an accepted one, and the damping at which a step is given up
         (Madsen, Nielsen & Tingleff's usual values; raising by more than lowering
         keeps the solver from oscillating between the two).
+    robust_delta : ``bilinear-segmented`` weights an observation by Huber's rule with this
+        threshold, relative to the median observed colour (what the model does not explain,
+        interreflected highlights or a lobe that is not Phong, counts as an outlier).
+    diffuse_quantile : ``bilinear-segmented`` takes a face's diffuse radiance as this
+        quantile of its colours (less the fitted specular) over the views.
+    segment_threshold, uniform_spread : neighbours whose log-albedos differ by less than
+        ``segment_threshold`` join one region; a region is uniform (its faces share one
+        albedo) when its log-albedo spread is below ``uniform_spread``.
+    tie_regions : ``bilinear-segmented`` makes the regions' albedo ratios agree with the
+        radiance ratios across their boundaries (neighbours see the same light).
+    segment_min_shading : ``bilinear-segmented`` segments faces whose diffuse shading is at
+        least this fraction of the ``recluster_shading_percentile`` level (a low quantile
+        of the colour over views divided by the shading is clean down to a few percent).
     variant : Mitsuba variant for the ray queries (None: auto).
     """
 
@@ -87,6 +100,12 @@ class EstimatorConfig:
     lm_damping_raise: float = 4.0
     lm_damping_lower: float = 3.0
     lm_damping_max: float = 1e8
+    robust_delta: float = 0.05
+    diffuse_quantile: float = 0.25
+    segment_threshold: float = 0.12
+    uniform_spread: float = 0.08
+    segment_min_shading: float = 0.05
+    tie_regions: bool = True
     variant: str | None = None
 
     def __post_init__(self):
@@ -109,6 +128,10 @@ class EstimatorConfig:
             (self.specular_model in SPECULAR_MODELS, f"specular_model must be one of {SPECULAR_MODELS}"),
             (0 < self.min_coverage <= 1, "min_coverage must lie in (0, 1]"),
             (self.negative_tolerance >= 0, "negative_tolerance must be >= 0"),
+            (0 <= self.diffuse_quantile <= 1, "diffuse_quantile must lie in [0, 1]"),
+            (self.robust_delta > 0, "robust_delta must be > 0"),
+            (0 <= self.segment_min_shading < 1, "segment_min_shading must lie in [0, 1)"),
+            (self.segment_threshold > 0 and self.uniform_spread > 0, "segment_threshold and uniform_spread must be > 0"),
             (0 <= self.recluster_min_shading < 1, "recluster_min_shading must lie in [0, 1)"),
             (0 < self.recluster_shading_percentile <= 100, "recluster_shading_percentile must lie in (0, 100]"),
             (self.lm_damping_start > 0 and self.lm_damping_max > self.lm_damping_start,

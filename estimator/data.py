@@ -74,6 +74,19 @@ class TriangleMesh:
         return n / np.where(length > 0, length, 1.0)
 
     @property
+    def face_adjacency(self) -> np.ndarray:
+        """(E, 2) int64 pairs of faces that share an edge (each pair once, lower index first)."""
+        f = self.faces
+        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        owner = np.tile(np.arange(len(f)), 3)
+        order = np.lexsort((edges[:, 1], edges[:, 0]))
+        edges, owner = edges[order], owner[order]
+        same = np.all(edges[1:] == edges[:-1], axis=1)
+        pairs = np.stack([owner[:-1][same], owner[1:][same]], axis=1)
+        pairs = np.sort(pairs, axis=1)
+        return np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
+
+    @property
     def areas(self) -> np.ndarray:
         """(F,) face areas."""
         c = self.corners

@@ -15,6 +15,7 @@ from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
 from .models import reflection_model
 from .pipeline import Prepared, prepare, with_config
+from .segmentation import albedo_features, quantile_color, segment
 from .solver import BilinearResult, solve_bilinear
 from .errors import InputError
 
@@ -66,9 +67,15 @@ class Method(ABC):
                         self.name, self.config, info, radiance)
 
     def _solve_groups(self, prep: Prepared, face_group: np.ndarray, num_groups: int,
-                       fixed_light: np.ndarray | None = None) -> BilinearResult:
+                      fixed_light: np.ndarray | None = None, weights: np.ndarray | None = None) -> BilinearResult:
+        """The bilinear solve over groups; ``weights`` (N,) scale each observation's squared
+        residual (rows are multiplied by their square root: the model is linear in rows)."""
         c = self.config
-        return solve_bilinear(prep.obs.rgb, face_group[prep.obs.face], prep.c_rows, prep.d_rows, num_groups,
+        rgb, c_rows, d_rows = prep.obs.rgb, prep.c_rows, prep.d_rows
+        if weights is not None:
+            root = np.sqrt(weights)[:, None]
+            rgb, c_rows, d_rows = rgb * root, c_rows * root, d_rows * root
+        return solve_bilinear(rgb, face_group[prep.obs.face], c_rows, d_rows, num_groups,
                               c.components, c.iterations, c.tol, fixed_light, schedule=c.lm_schedule)
 
 
@@ -184,6 +191,187 @@ class BilinearClustered(Method):
         level = np.percentile(lum, self.config.recluster_shading_percentile)
         valid = (lum > self.config.recluster_min_shading * level) & np.all(np.isfinite(albedo), axis=1)
         return np.where(np.isfinite(albedo), albedo, 0.0), valid
+
+
+@register_method
+class BilinearSegmented(BilinearClustered):
+    """The paper's bilinear solve with clusters found on the mesh instead of in colour space.
+
+    Beyond the paper (measured on the real-light family, ``benchmarks/real_light.py``):
+
+    * Clusters are regions of the face-adjacency graph: neighbours whose shading-corrected
+      albedos agree within ``segment_threshold`` (log) join; regions of uniform albedo
+      (spread below ``uniform_spread``) with similar albedo merge (mean shift). Hue alone
+      never merges a dark and a bright region, and a region is a region wherever it lies.
+    * The solve is robust: observations the model does not explain (interreflected
+      highlights, lobes that are not Phong) get Huber weights (IRLS, threshold
+      ``robust_delta`` of the median colour).
+    * A face is unestimated only when the estimated light does not reach it (shading
+      below 2 % of the 95th percentile), not because its albedo is dark.
+    * Faces outside every uniform region (texture) form clusters of their own.
+    """
+
+    name = "bilinear-segmented"
+
+    def solve(self, prep):
+        c = self.config
+        mesh = prep.data.mesh
+        f = mesh.num_faces
+        obs = prep.obs
+        med = prep.all_obs.median_color()
+        seen = ~np.isnan(med[:, 0])
+        edges = mesh.face_adjacency
+        t = time.perf_counter()
+        face_group = np.zeros(f, dtype=np.int64)
+        angular, _ = mean_shift(med[seen], c.bandwidth, metric="angular")
+        face_group[seen] = angular
+        history = [int(angular.max()) + 1]
+        weights = np.ones(len(obs.face))
+        in_solve = seen.copy()
+        result = self._solve_groups(prep, face_group, int(face_group.max()) + 1, weights=weights)
+        visited = []
+        for _ in range(c.recluster_rounds):
+            albedo, usable = self._face_albedo(prep, face_group, result, seen)
+            labels, _ = segment(np.where(usable[:, None], albedo, 1.0), edges, usable,
+                                c.segment_threshold, c.uniform_spread)
+            new_group = self._assign(labels, albedo, seen, edges, 2.5 * c.segment_threshold)
+            in_solve = seen & (new_group < int(labels.max()) + 1)  # faces of uniform regions carry the light
+            history.append(int(labels.max()) + 1)
+            if any(_same_partition(new_group[seen], old) for old in visited):
+                break
+            visited.append(new_group[seen].copy())
+            weights = self._robust_weights(prep, face_group, result) * in_solve[obs.face]
+            face_group = new_group
+            result = self._solve_groups(prep, face_group, int(face_group.max()) + 1, weights=weights)
+        albedo, usable = self._face_albedo(prep, face_group, result, seen)
+        regions = int(face_group[in_solve].max()) + 1 if in_solve.any() else 0
+        diffuse = np.where(np.isfinite(albedo), albedo, 0.0)
+        region_albedo = np.array([np.median(albedo[(face_group == r) & usable], axis=0)
+                                  if ((face_group == r) & usable).any() else np.full(3, np.nan)
+                                  for r in range(regions)]).reshape(-1, 3)
+        if c.tie_regions and regions > 1:
+            region_albedo = self._tie_regions(region_albedo, albedo, usable, face_group, edges, regions)
+        for r in range(regions):  # a uniform region shares one albedo
+            diffuse[face_group == r] = np.nan_to_num(region_albedo[r])
+        shading = (prep.c_matrix @ result.light).mean(axis=1)
+        observed = seen & (shading > 0.02 * max(float(np.percentile(shading[seen], 95)), 1e-30)) \
+            & np.all(np.isfinite(albedo) | (face_group < regions)[:, None], axis=1)
+        specular = np.zeros((f, 3))
+        grouped = face_group < regions
+        specular[grouped] = result.specular[face_group[grouped]]
+        if (~grouped & seen).any() and regions:
+            specular[~grouped] = np.median(result.specular[:regions], axis=0)
+        labels_out = np.where(observed, face_group, -1).astype(np.int64)
+        info = {"clusters": int(len(np.unique(face_group[observed]))), "uniform_regions": regions,
+                "uniform_share": float(np.mean(grouped[observed])) if observed.any() else 0.0,
+                "angular_clusters": history[0], "regions_per_round": history,
+                "clustering_s": time.perf_counter() - t,
+                "residuals": result.residuals, "lm_residuals": result.lm_residuals}
+        return Estimate(np.where(observed[:, None], diffuse, 0.0), np.where(observed[:, None], specular, 0.0),
+                        self.model.pseudo_from_light(result.light), labels_out, observed, self.name, c, info,
+                        result.light if self.model.light == "radiance" else None)
+
+    @staticmethod
+    def _tie_regions(region_albedo, albedo, usable, face_group, edges, regions, anchor: float = 1e-3):
+        """Region albedos whose ratios agree with their boundaries.
+
+        Faces on either side of a boundary receive nearly the same light, so the median
+        log-ratio of their (shading-corrected) albedos across the boundary is the ratio of
+        the two regions' albedos, whatever the light; this holds where the light estimate
+        is weakest (a region lit from directions only it sees). Per channel, the region
+        log-albedos a solve min sum_pairs n_rs (a_r - a_s - rho_rs)^2 (n_rs boundary edges)
+        with their face-weighted mean held at the solve's, and a weak pull ``anchor`` x
+        faces towards each region's own solve value (a region with no boundary keeps it).
+        """
+        i, j = edges[:, 0], edges[:, 1]
+        gi, gj = face_group[i], face_group[j]
+        cross = (gi != gj) & (gi < regions) & (gj < regions) & usable[i] & usable[j]
+        if not cross.any():
+            return region_albedo
+        la = np.log(np.maximum(albedo, 1e-30))
+        pairs = np.sort(np.stack([gi[cross], gj[cross]], 1), axis=1)
+        flip = gi[cross] > gj[cross]
+        diff = np.where(flip[:, None], la[j[cross]] - la[i[cross]], la[i[cross]] - la[j[cross]])
+        keys, inverse = np.unique(pairs, axis=0, return_inverse=True)
+        sizes = np.array([np.sum(usable & (face_group == r)) for r in range(regions)], float)
+        base = np.log(np.maximum(region_albedo, 1e-30))
+        out = region_albedo.copy()
+        for c in range(region_albedo.shape[1]):
+            rows, rhs, w = [], [], []
+            for k, (r, s_) in enumerate(keys):
+                sel = inverse.ravel() == k
+                row = np.zeros(regions)
+                row[r], row[s_] = 1.0, -1.0
+                rows.append(row)
+                rhs.append(np.median(diff[sel, c]))
+                w.append(sel.sum())
+            known = np.isfinite(base[:, c])
+            level = sizes * known / max(float(np.sum(sizes * known)), 1e-30)   # keeps the mean log-albedo
+            a = np.vstack([np.array(rows) * np.sqrt(w)[:, None], np.sqrt(np.sum(w)) * level[None],
+                           np.diag(np.sqrt(anchor * sizes * known))])
+            b = np.concatenate([np.array(rhs) * np.sqrt(w), [np.sqrt(np.sum(w)) * level @ np.nan_to_num(base[:, c])],
+                                np.sqrt(anchor * sizes * known) * np.nan_to_num(base[:, c])])
+            out[:, c] = np.exp(np.linalg.lstsq(a, b, rcond=None)[0])
+        return out
+
+    def _face_albedo(self, prep, face_group, result, seen) -> tuple[np.ndarray, np.ndarray]:
+        """(F, 3) per-face diffuse albedo: a low quantile over views of the colour less the
+        fitted specular, divided by the diffuse shading; and where it is usable (lit)."""
+        c = self.config
+        obs = prep.obs
+        g = face_group[obs.face]
+        spec = result.specular[g] * (prep.d_rows @ result.light)
+        radiance = quantile_color(obs.face, obs.rgb - spec, len(face_group), c.diffuse_quantile)
+        shade = prep.c_matrix @ result.light
+        lum = shade.mean(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            albedo = radiance / shade
+        level = np.percentile(lum[seen], c.recluster_shading_percentile) if seen.any() else 0.0
+        usable = seen & (lum > c.segment_min_shading * level) & np.all(np.isfinite(albedo) & (albedo > 0), axis=1)
+        return albedo, usable
+
+    @staticmethod
+    def _assign(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, edges: np.ndarray,
+                reach: float) -> np.ndarray:
+        """Groups: the uniform regions; a face outside them joins the region whose albedo
+        features are within ``reach`` of its own (shading noise in dim faces), or, when its
+        albedo is unknown (no light) or 90 % of the faces are in regions already, the region
+        most of its neighbours joined; any other face is a group of its own (texture)."""
+        group = labels.copy()
+        regions = int(group.max()) + 1
+        if regions:
+            finite = np.all(np.isfinite(albedo) & (albedo > 0), axis=1)
+            feat = albedo_features(np.where(finite[:, None], albedo, 1.0))
+            centres = np.array([np.median(feat[group == r], axis=0) for r in range(regions)])
+            dist = np.max(np.abs(feat[:, None, :] - centres[None]), axis=2)
+            near = (group < 0) & seen & finite & (dist.min(axis=1) < reach)
+            group[near] = np.argmin(dist[near], axis=1)
+            # in a piecewise-uniform object (nearly every face in a region) the rest are faces
+            # the shading model fails on (concavities, silhouettes): they follow their neighbours
+            piecewise = np.mean(group[seen] >= 0) >= 0.9
+            for _ in range(8):  # faces without a usable albedo follow their neighbours
+                todo = (group < 0) & seen & (~finite | piecewise)
+                if not todo.any():
+                    break
+                votes = np.zeros((len(group), regions))
+                for src, dst in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
+                    ok = todo[src] & (group[dst] >= 0)
+                    np.add.at(votes, (src[ok], group[dst[ok]]), 1.0)
+                decided = todo & (votes.max(axis=1) > 0)
+                group[decided] = np.argmax(votes[decided], axis=1)
+        free = np.nonzero((group < 0) & seen)[0]
+        group[free] = regions + np.arange(len(free))
+        group[~seen] = 0
+        _, compact = np.unique(group, return_inverse=True)
+        return compact.astype(np.int64)
+
+    def _robust_weights(self, prep, face_group, result) -> np.ndarray:
+        obs = prep.obs
+        g = face_group[obs.face]
+        pred = result.diffuse[g] * (prep.c_rows @ result.light) + result.specular[g] * (prep.d_rows @ result.light)
+        r = np.linalg.norm(obs.rgb - pred, axis=1)
+        scale = self.config.robust_delta * max(float(np.median(np.linalg.norm(obs.rgb, axis=1))), 1e-30)
+        return np.minimum(1.0, scale / np.maximum(r, 1e-30))
 
 
 def _same_partition(a: np.ndarray, b: np.ndarray) -> bool:

@@ -90,6 +90,7 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
                 ratios[component] = r
         s = metrics.lstsq_scale(est_albedo[mask], true_albedo[mask])
         de = metrics.ciede2000(est_albedo[mask] * s, true_albedo[mask]) if mask.any() else np.zeros(0)
+        entry["psnr_lstsq"] = metrics.albedo_psnr(est_albedo, true_albedo, mask)
         entry["ciede2000"] = {"mean": float(de.mean()) if de.size else None,
                               "median": float(np.median(de)) if de.size else None,
                               "p90": float(np.percentile(de, 90)) if de.size else None}

@@ -15,6 +15,7 @@ SUMMARY_ROWS = [  # (label, dotted path, format)
     ("diffuse albedo within ±10 % (DC gauge)", "albedo.diffuse.dc.luminance.within_10", "{:.3f}"),
     ("diffuse median ratio (DC gauge)", "albedo.diffuse.dc.luminance.median_ratio", "{:.3f}"),
     ("diffuse within ±10 % (least-squares scale)", "albedo.diffuse.lstsq.luminance.within_10", "{:.3f}"),
+    ("diffuse albedo PSNR, least-squares scale (dB)", "albedo.diffuse.psnr_lstsq", "{:.2f}"),
     ("diffuse CIEDE2000 median", "albedo.diffuse.ciede2000.median", "{:.2f}"),
     ("clusters: adjusted Rand index", "clusters.ari", "{:.3f}"),
     ("clusters found", "clusters.clusters", "{}"),

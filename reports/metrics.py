@@ -73,6 +73,16 @@ def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, sca
     return np.column_stack([per_channel, lum])
 
 
+def albedo_psnr(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float | None:
+    """PSNR (dB, peak 1) of per-face albedo (F, 3) over the masked faces after a per-channel
+    least-squares scale of the estimate onto the truth (the albedo/light gauge)."""
+    e, t = np.asarray(estimate, float)[mask], np.asarray(truth, float)[mask]
+    if e.size == 0:
+        return None
+    mse = float(np.mean((e * lstsq_scale(e, t)[None] - t) ** 2))
+    return 100.0 if mse <= 1e-10 else float(10 * np.log10(1.0 / mse))
+
+
 def ratio_summary(ratios: np.ndarray) -> dict:
     """Median, inter-quartile range and share within +-5 % / +-10 % of finite ratios (n,)."""
     r = np.asarray(ratios, float)

@@ -16,6 +16,7 @@ TRACKED: dict[str, tuple[str, float]] = {
     "albedo.diffuse.dc.luminance.within_10": ("higher", 0.02),
     "albedo.diffuse.lstsq.luminance.within_10": ("higher", 0.02),
     "albedo.diffuse.ciede2000.median": ("lower", 0.5),
+    "albedo.diffuse.psnr_lstsq": ("higher", 0.5),
     "albedo.specular.ciede2000.median": ("lower", 0.5),
     "clusters.ari": ("higher", 0.02),
     "novel_views.psnr_srgb": ("higher", 0.5),

@@ -129,6 +129,8 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
             with open(os.path.join(tmp, MARKER), "w") as f:
                 json.dump({"kind": kind, "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid()}, f)
             if os.path.exists(path):
+                if not overwrite:  # another process wrote it meanwhile
+                    raise OutputExistsError(f"{path} appeared while this output was being written")
                 check_output(path, inputs, overwrite=True)
                 trash = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.old-{os.getpid()}-", dir=parent)
                 os.replace(path, os.path.join(trash, "old"))
