@@ -291,7 +291,7 @@ def test_degenerate_mesh_and_flags(copy, tmp_path, capsys):
                  inputs=[ds], absent=[tmp_path / "r"])
     expect_error(capsys, ["render", run, "-o", tmp_path / "p", "--rotate-illumination", "y", "nan"],
                  "--rotate-illumination", inputs=[run], absent=[tmp_path / "p"])
-    expect_error(capsys, ["generate", MICRO, "-o", tmp_path / "g", "--resolution", "0"], "--resolution",
+    expect_error(capsys, ["generate", MICRO, "-o", tmp_path / "g", "--resolution", "0"], "--resolution", ">= 1",
                  absent=[tmp_path / "g"])
 
 
