@@ -312,6 +312,28 @@ def cmd_render(args) -> int:
     return 0
 
 
+def cmd_export_texture(args) -> int:
+    from harness.io.atomic import atomic_directory
+    from harness.io.dataset import read_dataset
+    from harness.io.mesh import load_mesh_with_uv
+    from harness.io.runs import read_run
+    from harness.io.texture import export_textures
+
+    est, run = read_run(args.run)
+    dataset = args.dataset or run["dataset"]
+    check_output(args.output, [args.run, dataset], args.overwrite)
+    ds = read_dataset(dataset, load_test=False, load_truth=False)
+    if ds.data.mesh.num_faces != est.diffuse.shape[0]:
+        raise InputError(f"the run {args.run} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
+                         f"{ds.data.mesh.num_faces}")
+    _, uv = load_mesh_with_uv(os.path.join(ds.path, ds.meta.get("mesh_file_path", "mesh.ply")))
+    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, dataset], kind="texture") as tmp:
+        summary = export_textures(tmp, ds.data.mesh, est, uv, args.size)
+    print(f"{summary['faces']} faces, {summary['size']}x{summary['size']} textures ({summary['uv_source']} UVs) "
+          f"written to {os.path.abspath(args.output)}")
+    return 0
+
+
 def _int_at_least(minimum: int):
     """An argparse type: an integer >= ``minimum`` (a one-line error otherwise)."""
     def parse(text: str) -> int:
@@ -421,6 +443,14 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba cross-check in the reports")
     su.add_argument("--overwrite", action="store_true", help="render the datasets again")
     su.set_defaults(func=cmd_suite)
+
+    tx = sub.add_parser("export-texture", help="an estimate as texture maps: UV atlas, PNG/EXR, OBJ+MTL, glTF")
+    tx.add_argument("run")
+    tx.add_argument("--dataset", help="dataset folder (default: the one the run was made from)")
+    tx.add_argument("-o", "--output", required=True, help="folder to create")
+    tx.add_argument("--size", type=_int_at_least(16), default=1024, help="texture width and height (default 1024)")
+    tx.add_argument("--overwrite", action="store_true")
+    tx.set_defaults(func=cmd_export_texture)
 
     d = sub.add_parser("demo", help="the main job on the default scene (earth-specular)")
     d.add_argument("-o", "--output", default="out")

@@ -121,6 +121,9 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
         os.makedirs(parent, exist_ok=True)
         remove_stale_partials(parent)
         tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.partial-{os.getpid()}-", dir=parent)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the output is an ordinary folder
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
     try:

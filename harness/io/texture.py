@@ -1,0 +1,133 @@
+"""An estimate as texture maps: a UV atlas, baked diffuse and specular textures
+(PNG sRGB and EXR linear), OBJ + MTL, glTF 2.0 binary and the light as a lat-long EXR.
+
+The per-face albedo is constant over each face, so baking is exact: every texel a
+face covers takes the face's value, and the empty texels around the charts take
+the value of the nearest covered texel (dilation across seams, so that filtering
+and mip-mapping do not bleed the background into the object).
+"""
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+from scipy import ndimage
+
+from estimator import sh
+from estimator.data import Estimate, TriangleMesh
+from estimator.errors import InputError
+
+from harness.io.exr import write_exr
+
+
+def uv_atlas(mesh: TriangleMesh, uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices (V', 3), faces (F, 3), uv (V', 2) in [0, 1]) with face order kept.
+
+    ``uv``: the mesh's own per-vertex texture coordinates (V, 2), used when given;
+    otherwise the mesh is unwrapped with xatlas, which splits vertices along seams
+    but keeps the faces and their order.
+    """
+    if uv is not None:
+        if uv.shape != (len(mesh.vertices), 2) or not np.all(np.isfinite(uv)):
+            raise InputError(f"texture coordinates must be finite (V, 2), got {uv.shape}")
+        return mesh.vertices, mesh.faces, np.asarray(uv, dtype=np.float64)
+    import xatlas
+
+    vmapping, indices, uvs = xatlas.parametrize(mesh.vertices.astype(np.float32), mesh.faces.astype(np.uint32))
+    if indices.shape != mesh.faces.shape or not np.array_equal(vmapping[indices], mesh.faces):
+        raise RuntimeError("xatlas changed the faces of the mesh")  # a bug, never bad input
+    return mesh.vertices[vmapping], indices.astype(np.int64), uvs.astype(np.float64)
+
+
+def bake(faces: np.ndarray, uv: np.ndarray, values: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-face values (F, C) into a (size, size, C) texture over the UV layout.
+
+    Each face is splatted at barycentric sample points dense enough for its texel
+    footprint, then its centroid last (a face's centroid texel is its own); empty
+    texels take their nearest covered texel. Row 0 is v = 1 (image convention).
+
+    Returns (texture (size, size, C) float32, covered (size, size) bool).
+    """
+    corners = uv[faces]                                                      # (F, 3, 2)
+    extent = np.ptp(corners, axis=1).max(axis=1) * size                     # texels across each face
+    k = int(np.clip(np.ceil(2 * np.percentile(extent, 99)), 2, 32))
+    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+    keep = i + j <= k
+    bary = np.column_stack([i[keep], j[keep], k - i[keep] - j[keep]]) / k    # (S, 3)
+    texture = np.zeros((size, size, values.shape[1]), np.float32)
+    covered = np.zeros((size, size), bool)
+    for weights in (bary, np.full((1, 3), 1 / 3)):                          # samples, then centroids
+        points = np.einsum("sk,fkd->fsd", weights, corners).reshape(-1, 2)
+        col = np.clip((points[:, 0] * size).astype(np.int64), 0, size - 1)
+        row = np.clip(((1.0 - points[:, 1]) * size).astype(np.int64), 0, size - 1)
+        face = np.repeat(np.arange(len(faces)), len(weights))
+        texture[row, col] = values[face]
+        covered[row, col] = True
+    if not covered.all():
+        _, (rows, cols) = ndimage.distance_transform_edt(~covered, return_indices=True)
+        texture = texture[rows, cols]
+    return texture, covered
+
+
+def sample(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Nearest-texel lookup of (size, size, C) at uv (N, 2) -> (N, C), :func:`bake`'s layout."""
+    size = texture.shape[0]
+    col = np.clip((uv[:, 0] * size).astype(np.int64), 0, size - 1)
+    row = np.clip(((1.0 - uv[:, 1]) * size).astype(np.int64), 0, size - 1)
+    return texture[row, col]
+
+
+def srgb8(linear: np.ndarray) -> np.ndarray:
+    """Linear [0, 1] -> 8-bit sRGB (clipped)."""
+    x = np.clip(linear, 0.0, 1.0)
+    encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(encoded * 255.0).astype(np.uint8)
+
+
+def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarray | None = None,
+                    size: int = 1024) -> dict:
+    """Write the estimate's texture maps, meshes and light into ``folder`` (which must exist).
+
+    Files: ``diffuse.{png,exr}``, ``specular.{png,exr}``, ``mesh.obj`` + ``material.mtl``,
+    ``mesh.glb``, ``radiance.exr`` and ``texture.json`` (scales and counts). The PNGs are
+    8-bit sRGB of the albedo times ``png_scale`` (so the brightest 0.5 % saturate at most:
+    the estimate's albedo is in the light's unit-DC gauge, not bounded by 1); the EXRs are
+    the linear albedo itself. Unestimated faces are black.
+    """
+    import trimesh
+    from PIL import Image
+
+    if size < 16 or size > 16384:
+        raise InputError(f"--size must lie in [16, 16384], got {size}")
+    vertices, faces, uvs = uv_atlas(mesh, uv)
+    summary = {"faces": int(len(faces)), "vertices": int(len(vertices)), "size": int(size),
+               "uv_source": "mesh" if uv is not None else "xatlas", "png_scale": {}}
+    images = {}
+    for name in ("diffuse", "specular"):
+        values = np.where(est.observed[:, None], getattr(est, name), 0.0)
+        texture, covered = bake(faces, uvs, values, size)
+        top = float(np.percentile(values[est.observed], 99.5)) if est.observed.any() else 1.0
+        scale = 1.0 / top if top > 1.0 else 1.0
+        write_exr(os.path.join(folder, f"{name}.exr"), texture)
+        images[name] = Image.fromarray(srgb8(texture * scale))
+        images[name].save(os.path.join(folder, f"{name}.png"))
+        summary["png_scale"][name] = scale
+        summary["covered_share"] = float(covered.mean())
+    light = est.radiance_sh if est.radiance_sh is not None else est.pseudo_sh
+    env = sh.to_latlong(light, 128, 256)
+    write_exr(os.path.join(folder, "radiance.exr"), np.maximum(env, 0.0))
+    summary["radiance"] = {"from": "radiance_sh" if est.radiance_sh is not None else "pseudo_sh (no radiance model)",
+                           "clamped_negative_share": float(np.mean(env < 0))}
+    material = trimesh.visual.material.PBRMaterial(name="estimate", baseColorTexture=images["diffuse"],
+                                                   metallicFactor=0.0, roughnessFactor=1.0)
+    textured = trimesh.Trimesh(vertices, faces, process=False,
+                               visual=trimesh.visual.TextureVisuals(uv=uvs, material=material))
+    textured.export(os.path.join(folder, "mesh.glb"))
+    simple = trimesh.visual.material.SimpleMaterial(name="estimate", image=images["diffuse"])
+    obj_mesh = trimesh.Trimesh(vertices, faces, process=False,
+                               visual=trimesh.visual.TextureVisuals(uv=uvs, material=simple))
+    obj_mesh.export(os.path.join(folder, "mesh.obj"), mtl_name="material.mtl")
+    with open(os.path.join(folder, "texture.json"), "w") as f:
+        json.dump(summary, f, indent=1)
+    return summary
