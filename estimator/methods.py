@@ -235,8 +235,11 @@ class BilinearSegmented(BilinearClustered):
             labels, _ = segment(np.where(usable[:, None], albedo, 1.0), edges, usable,
                                 c.segment_threshold, c.uniform_spread)
             new_group = self._assign(labels, albedo, seen, edges, 2.5 * c.segment_threshold)
-            in_solve = seen & (new_group < int(labels.max()) + 1)  # faces of uniform regions carry the light
+            new_in_solve = seen & (new_group < int(labels.max()) + 1)  # faces of uniform regions carry the light
             history.append(int(labels.max()) + 1)
+            if new_in_solve.sum() < 0.5 * seen.sum():
+                break  # no piecewise-uniform structure this round: keep the partition that had one
+            in_solve = new_in_solve
             if any(_same_partition(new_group[seen], old) for old in visited):
                 break
             visited.append(new_group[seen].copy())
@@ -245,6 +248,7 @@ class BilinearSegmented(BilinearClustered):
             result = self._solve_groups(prep, face_group, int(face_group.max()) + 1, weights=weights)
         albedo, usable = self._face_albedo(prep, face_group, result, seen)
         regions = int(face_group[in_solve].max()) + 1 if in_solve.any() else 0
+        in_solve = seen & (face_group < regions)
         diffuse = np.where(np.isfinite(albedo), albedo, 0.0)
         region_albedo = np.array([np.median(albedo[(face_group == r) & usable], axis=0)
                                   if ((face_group == r) & usable).any() else np.full(3, np.nan)
