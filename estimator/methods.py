@@ -60,8 +60,13 @@ class Method(ABC):
         diffuse[observed] = result.diffuse[face_group[observed]]
         specular[observed] = result.specular[face_group[observed]]
         labels = np.where(observed, face_group, -1).astype(np.int64)
+        groups = len(np.unique(face_group[prep.obs.face]))
+        per_group = 2 if self.config.components == "both" else 1
+        light_unknowns = 0 if self.needs_illumination else result.light.shape[0] - 1   # unit DC: the gauge
         info = {**info, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
-                "lm_steps": [len(r) for r in result.lm_residuals]}
+                "lm_steps": [len(r) for r in result.lm_residuals],
+                "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),
+                                       "unknowns": int(3 * (groups * per_group + light_unknowns))}}
         radiance = result.light if self.model.light == "radiance" else None
         return Estimate(diffuse, specular, self.model.pseudo_from_light(result.light), labels, observed,
                         self.name, self.config, info, radiance)
@@ -426,7 +431,21 @@ def estimate(data: MultiViewData, method: str = "bilinear-clustered", config: Es
     est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
     rejected = prep.all_obs.rejected
     est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
+    est.info["warnings"] = _warnings(est)
     return est
+
+
+def _warnings(est: Estimate, max_unkept: float = 0.2) -> list[str]:
+    """What makes an estimate untrustworthy without ground truth, one line each."""
+    out = []
+    dof = est.info.get("degrees_of_freedom")
+    if dof and dof["unknowns"] >= dof["observations"]:
+        out.append(f"underdetermined: {dof['unknowns']} unknowns for {dof['observations']} observations "
+                   "(the solve fits exactly whatever the truth; add views)")
+    unkept = est.info.get("faces_without_kept_views", 0.0)
+    if unkept > max_unkept:
+        out.append(f"{100 * unkept:.0f} % of the faces have no observation within min_cos_view of their normal")
+    return out
 
 
 def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates) -> Estimate:

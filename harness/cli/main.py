@@ -271,6 +271,8 @@ def cmd_estimate(args) -> int:
     est = estimate(ds.data, method, config, **known, log=lambda m: _err(f"  {m}"), exponent_candidates=candidates)
     for name, count in est.info.get("rejected_pixels", {}).items():
         _err(f"warning: {name}: {count} pixels negative beyond noise were left out")
+    for line in est.info.get("warnings", []):
+        _err(f"warning: {line}")
     est.info["peak_rss_mib"] = _peak_rss_mib()
     write_run(args.output, est, args.dataset, overwrite=args.overwrite, extra={"scene": ds.meta.get("scene")},
               fingerprint=fingerprint(ds.data))
@@ -280,6 +282,9 @@ def cmd_estimate(args) -> int:
           f"(observations {t['observations']:.1f}, visibility {t['visibility']:.1f}, "
           f"reflection {t['reflection']:.1f}, solve {t['solve']:.1f}), peak {_peak_rss_mib():.0f} MiB\n"
           f"written to {os.path.abspath(args.output)}")
+    if args.strict and est.info.get("warnings"):
+        _err(f"pseudolight: --strict: {len(est.info['warnings'])} warning(s); the run is written, exit 3")
+        return 3
     return 0
 
 
@@ -401,6 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("dataset")
     e.add_argument("-o", "--output", required=True, help="run folder to create")
     e.add_argument("--overwrite", action="store_true")
+    e.add_argument("--strict", action="store_true",
+                   help="exit with code 3 when the estimate warns (underdetermined, faces without views)")
     e.add_argument("--truth", metavar="DATASET", help="dataset whose ground_truth/ gives the known light of the "
                                                       "known-illumination oracle (default: the dataset itself)")
     _add_estimator_flags(e)

@@ -184,7 +184,7 @@ def test_negative_pixels_are_dropped_and_reported(copy, tmp_path, capsys):
     write_exr(ds / "images" / "train_002.exr", image)
     assert main(["estimate", str(ds), "-o", str(tmp_path / "r")]) == 0
     err = capsys.readouterr().err
-    warning = [line for line in err.splitlines() if line.startswith("warning:")]
+    warning = [line for line in err.splitlines() if line.startswith("warning:") and "negative" in line]
     assert len(warning) == 1 and "train_002" in warning[0] and "negative" in warning[0]
     assert int(warning[0].split(": ")[2].split()[0]) > 0
     meta = json.load(open(tmp_path / "r" / "run.json"))
@@ -361,3 +361,18 @@ def test_internal_errors_keep_their_traceback(copy, tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="a bug"):
         main(["estimate", str(ds), "-o", str(tmp_path / "r")])
     assert not (tmp_path / "r").exists()
+
+
+def test_underdetermined_estimates_warn_and_fail_under_strict(tmp_path, capsys):
+    ds = tmp_path / "one-view"
+    assert main(["generate", MICRO, "-o", str(ds), "--views", "1"]) == 0
+    assert main(["estimate", str(ds), "-o", str(tmp_path / "r")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: underdetermined" in err
+    assert main(["estimate", str(ds), "-o", str(tmp_path / "r2"), "--strict"]) == 3
+    assert "--strict" in capsys.readouterr().err and (tmp_path / "r2" / "run.json").is_file()
+    many = tmp_path / "many"
+    assert main(["generate", MICRO, "-o", str(many)]) == 0
+    # 6 views: per face (72 x 2 albedos + light) is still underdetermined, one cluster is not
+    assert main(["estimate", str(many), "-o", str(tmp_path / "r3"), "--strict", "--method", "bilinear-clustered"]) == 0
+    assert "underdetermined" not in capsys.readouterr().err
