@@ -20,7 +20,7 @@ import numpy as np
 from estimator.backend import VARIANTS
 from estimator.errors import InputError
 
-from harness.io.atomic import OutputError, check_output
+from harness.io.atomic import OutputError, check_output, refuse_inputs
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
 
@@ -139,9 +139,7 @@ def _report_exit(metrics: dict, regressions, out: str) -> int:
 def _check_json_target(path: str, inputs: list) -> str:
     """Refuse a JSON output file that is an input, a folder, or in an unwritable place."""
     target = os.path.realpath(os.path.abspath(path))
-    for item in inputs:
-        if item and os.path.realpath(os.path.abspath(item)) == target:
-            raise OutputError(f"{path} is an input of this command; choose another file")
+    refuse_inputs(target, inputs)
     if os.path.isdir(target):
         raise OutputError(f"{path} is a folder, not a file")
     parent = os.path.dirname(target)
@@ -160,9 +158,10 @@ def _write_json_file(path: str, value: dict, inputs: list) -> None:
         dump_json(tmp, value)
         os.replace(tmp, target)
     except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
         if os.path.exists(tmp):
             os.remove(tmp)
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
 
 
 def cmd_report(args) -> int:
@@ -252,6 +251,7 @@ def cmd_estimate(args) -> int:
 
     check_output(args.output, [args.dataset, args.truth], args.overwrite)
     ds = read_dataset(args.dataset, load_test=False, load_truth=False)
+    check_output(args.output, [*ds.inputs, args.truth], args.overwrite)   # mesh and images may lie elsewhere
     flags = _config_flags(args)
     candidates = None
     if flags.get("phong_exponent") == "auto":
@@ -275,7 +275,7 @@ def cmd_estimate(args) -> int:
         _err(f"warning: {line}")
     est.info["peak_rss_mib"] = _peak_rss_mib()
     write_run(args.output, est, args.dataset, overwrite=args.overwrite, extra={"scene": ds.meta.get("scene")},
-              fingerprint=fingerprint(ds.data))
+              fingerprint=fingerprint(ds.data), inputs=[*ds.inputs, args.truth])
     t = est.info["timings"]
     print(f"{method} on {ds.meta.get('scene', args.dataset)}: {est.info.get('clusters', '?')} clusters, "
           f"{100 * est.observed.mean():.1f}% faces estimated, {t['total']:.1f} s "
@@ -302,13 +302,14 @@ def cmd_render(args) -> int:
     dataset = args.dataset or run["dataset"]
     check_output(args.output, [args.run, dataset], args.overwrite)
     ds = read_dataset(dataset, load_truth=False)
+    check_output(args.output, [args.run, *ds.inputs], args.overwrite)
     views = {"test": ds.data.test_views, "train": ds.data.views,
              "all": ds.data.views + ds.data.test_views}[args.frames]
     if not views:
         raise InputError(f"the dataset {ds.path} has no {args.frames} frames")
     rotation = None if rotation is None else axis_angle_matrix(*rotation)
     predictor = Predictor(ds.data.mesh, est)
-    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, dataset], kind="render") as tmp:
+    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, *ds.inputs], kind="render") as tmp:
         for view in views:
             rgb, coverage = predictor.predict(view.camera, rotation)
             name = os.path.splitext(os.path.basename(view.name))[0] + ".exr"
@@ -328,11 +329,12 @@ def cmd_export_texture(args) -> int:
     dataset = args.dataset or run["dataset"]
     check_output(args.output, [args.run, dataset], args.overwrite)
     ds = read_dataset(dataset, load_test=False, load_truth=False)
+    check_output(args.output, [args.run, *ds.inputs], args.overwrite)
     if ds.data.mesh.num_faces != est.diffuse.shape[0]:
         raise InputError(f"the run {args.run} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
                          f"{ds.data.mesh.num_faces}")
     _, uv = load_mesh_with_uv(os.path.join(ds.path, ds.meta.get("mesh_file_path", "mesh.ply")))
-    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, dataset], kind="texture") as tmp:
+    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, *ds.inputs], kind="texture") as tmp:
         summary = export_textures(tmp, ds.data.mesh, est, uv, args.size)
     print(f"{summary['faces']} faces, {summary['size']}x{summary['size']} textures ({summary['uv_source']} UVs) "
           f"written to {os.path.abspath(args.output)}")

@@ -40,6 +40,7 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     dataset_dir = dataset_dir or run["dataset"]
     check_output(out_dir, [run_dir, dataset_dir], overwrite)
     ds = read_dataset(dataset_dir)
+    check_output(out_dir, [run_dir, *ds.inputs], overwrite)
     if ds.ground_truth is None:
         raise InputError(f"{ds.path} has no ground_truth/: a report compares with ground truth")
     if ds.data.mesh.num_faces != est.diffuse.shape[0]:
@@ -75,7 +76,7 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     regressions = check(m, baseline) if baseline is not None else None
     m["report_seconds"] = time.perf_counter() - t0
 
-    with atomic_directory(out_dir, overwrite=overwrite, inputs=[run_dir, dataset_dir], kind="report") as tmp:
+    with atomic_directory(out_dir, overwrite=overwrite, inputs=[run_dir, *ds.inputs], kind="report") as tmp:
         dump_json(os.path.join(tmp, "metrics.json"), m)
         np.savez(os.path.join(tmp, "ratios.npz"), **content.ratios)
         for index, (section, _, png) in enumerate(content.figures):

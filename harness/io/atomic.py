@@ -7,7 +7,7 @@ Rules (``check_output``), checked before any work starts and again on writing:
   or pseudolight wrote it (it holds the marker file :data:`MARKER`);
 * the parent folder must be creatable and writable.
 
-Writing goes to a temporary ``.NAME.partial-PID-XXXX`` folder beside the output,
+Writing goes to a temporary ``.NAME.pseudolight-partial-PID-XXXX`` folder beside the output,
 renamed into place when complete; partial folders whose process is gone (killed
 by SIGKILL) are removed by the next write into the same parent.
 """
@@ -24,7 +24,7 @@ import time
 from estimator.errors import InputError
 
 MARKER = ".pseudolight-output"
-_PARTIAL = re.compile(r"^\..+\.(?:partial|old)-(\d+)-")
+_PARTIAL = re.compile(r"^\..+\.pseudolight-(?:partial|old)-(\d{1,9})-")
 
 
 class OutputError(InputError):
@@ -39,6 +39,17 @@ def _inside(inner: str, outer: str) -> bool:
     return inner == outer or inner.startswith(outer.rstrip(os.sep) + os.sep)
 
 
+def refuse_inputs(out: str, inputs) -> None:
+    """Raise :class:`OutputError` when ``out`` is, contains or lies inside any of ``inputs``."""
+    for item in inputs:
+        if item is None or item == "":
+            continue
+        source = os.path.realpath(os.path.abspath(str(item)))
+        if _inside(out, source) or _inside(source, out):
+            relation = "is" if out == source else ("lies inside" if _inside(out, source) else "contains")
+            raise OutputError(f"output {out} {relation} the input {source}; choose another -o")
+
+
 def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: bool = False) -> str:
     """Refuse an output that would destroy an input or a folder pseudolight did not write.
 
@@ -51,13 +62,7 @@ def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: 
     Returns the absolute output path. Raises :class:`OutputError` naming the folder.
     """
     out = os.path.realpath(os.path.abspath(str(path)))
-    for item in inputs:
-        if item is None:
-            continue
-        source = os.path.realpath(os.path.abspath(str(item)))
-        if _inside(out, source) or _inside(source, out):
-            relation = "is" if out == source else ("lies inside" if _inside(out, source) else "contains")
-            raise OutputError(f"output {out} {relation} the input {source}; choose another -o")
+    refuse_inputs(out, inputs)
     if os.path.lexists(out):
         if not os.path.isdir(out) or os.path.islink(out):
             raise OutputError(f"output {out} exists and is not a folder")
@@ -83,14 +88,14 @@ def _process_alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
-        return True
+    except (PermissionError, OverflowError, ValueError):
+        return True  # when in doubt, keep the folder
     return True
 
 
 def remove_stale_partials(parent: str) -> list[str]:
-    """Remove ``.NAME.partial-PID-*`` / ``.NAME.old-PID-*`` folders in ``parent`` whose
-    process no longer runs; returns the removed paths."""
+    """Remove ``.NAME.pseudolight-partial-PID-*`` / ``.NAME.pseudolight-old-PID-*`` folders in
+    ``parent`` whose process no longer runs (only names this module makes); returns them."""
     removed = []
     try:
         names = os.listdir(parent)
@@ -120,7 +125,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
     try:
         os.makedirs(parent, exist_ok=True)
         remove_stale_partials(parent)
-        tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.partial-{os.getpid()}-", dir=parent)
+        tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.pseudolight-partial-{os.getpid()}-", dir=parent)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the output is an ordinary folder
@@ -135,7 +140,8 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
                 if not overwrite:  # another process wrote it meanwhile
                     raise OutputExistsError(f"{path} appeared while this output was being written")
                 check_output(path, inputs, overwrite=True)
-                trash = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.old-{os.getpid()}-", dir=parent)
+                trash = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.pseudolight-old-{os.getpid()}-",
+                                         dir=parent)
                 os.replace(path, os.path.join(trash, "old"))
                 os.replace(tmp, path)
                 shutil.rmtree(trash, ignore_errors=True)

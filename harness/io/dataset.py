@@ -38,6 +38,12 @@ class Dataset:
     data: MultiViewData
     ground_truth: GroundTruth | None
     meta: dict
+    files: tuple = ()  # every file read (mesh, images), which may lie outside ``path``
+
+    @property
+    def inputs(self) -> list[str]:
+        """The folder and every file read from it or elsewhere: what an output must not touch."""
+        return [self.path, *self.files]
 
 
 def _frame_json(camera: Camera, file_path: str) -> dict:
@@ -141,7 +147,8 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
         raise DatasetError(f"{where}: {exc}") from None
 
 
-def _read_views(folder: str, frames, top: dict, key: str) -> list[View]:
+def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[View]:
+    """The views of a frame list; every image path read is appended to ``files``."""
     if not isinstance(frames, list):
         raise DatasetError(f"transforms.json {key} must be a list of frames, got {type(frames).__name__}")
     views = []
@@ -161,6 +168,7 @@ def _read_views(folder: str, frames, top: dict, key: str) -> list[View]:
         alpha = image[..., 3] if image.shape[2] == 4 else None
         try:
             views.append(View(frame["file_path"], cam, image[..., :3], alpha))
+            files.append(path)
         except InputError as exc:
             raise DatasetError(f"{path}: {exc}") from None
     return views
@@ -210,18 +218,23 @@ def read_ground_truth(folder: str, num_faces: int) -> GroundTruth | None:
     if isinstance(exponent, bool) or not isinstance(exponent, (int, float)) or not np.isfinite(exponent) or exponent <= 0:
         raise DatasetError(f"{gt}/illumination.json: brdf.exponent must be a positive number, got {exponent!r}")
     regions = mats.get("regions")
-    if regions is not None and regions.shape != (num_faces,):
-        raise DatasetError(f"{gt}/materials.npz: regions has shape {regions.shape}, mesh has {num_faces} faces")
+    if regions is not None and (regions.shape != (num_faces,) or not np.issubdtype(regions.dtype, np.integer)
+                                or (num_faces and (regions.min() < 0 or regions.max() >= num_faces))):
+        raise DatasetError(f"{gt}/materials.npz: regions must be {num_faces} integers in [0, {num_faces}), "
+                           f"got {regions.dtype} of shape {regions.shape}")
     return GroundTruth(diffuse=mats["diffuse"], specular=mats["specular"], radiance_sh=radiance,
                        brdf=info["brdf"], illumination=info["illumination"], regions=regions)
 
 
 def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: bool = True) -> Dataset:
     """Read a dataset folder; every missing or malformed part raises :class:`DatasetError`.
+    ``Dataset.inputs`` lists the folder and every file read (mesh and images may lie elsewhere).
 
     ``load_truth=False`` leaves ``ground_truth`` None without reading it: estimation
     reads only images, cameras and mesh.
     """
+    if not str(folder):
+        raise DatasetError("the dataset path is empty")
     folder = os.path.abspath(str(folder))
     tpath = os.path.join(folder, "transforms.json")
     if not os.path.isdir(folder):
@@ -246,11 +259,12 @@ def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: 
     frames = top.get("frames", [])
     if not frames:
         raise DatasetError(f"{tpath} has no frames")
-    views = _read_views(folder, frames, top, "frames")
-    test_views = _read_views(folder, top.get("test_frames", []), top, "test_frames") if load_test else []
+    files = [mesh_path]
+    views = _read_views(folder, frames, top, "frames", files)
+    test_views = _read_views(folder, top.get("test_frames", []), top, "test_frames", files) if load_test else []
     meta = {k: v for k, v in top.items() if k not in ("frames", "test_frames")}
     truth = read_ground_truth(folder, mesh.num_faces) if load_truth else None
-    return Dataset(folder, MultiViewData(mesh, views, test_views), truth, meta)
+    return Dataset(folder, MultiViewData(mesh, views, test_views), truth, meta, tuple(files))
 
 
 def fingerprint(data: MultiViewData) -> dict:

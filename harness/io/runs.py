@@ -57,16 +57,17 @@ def versions() -> dict:
 
 
 def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False, extra: dict | None = None,
-              fingerprint: dict | None = None) -> None:
+              fingerprint: dict | None = None, inputs: list | None = None) -> None:
     """Write an estimate atomically (the folder appears whole or not at all).
 
     ``illumination.exr`` is the pseudo illumination on a 256x128 lat-long map in
     Mitsuba's envmap orientation, clamped at 0 (SH ringing can go negative;
     Mitsuba's envmap needs non-negative radiance); the exact SH are in estimate.npz.
     ``fingerprint`` (:func:`harness.io.dataset.fingerprint`) identifies the mesh,
-    cameras and images the estimate was computed from; ``report`` checks it.
+    cameras and images the estimate was computed from; ``report`` checks it. ``inputs``:
+    further paths the output must not touch (the dataset's files, :attr:`Dataset.inputs`).
     """
-    with atomic_directory(folder, overwrite=overwrite, inputs=[dataset], kind="run") as tmp:
+    with atomic_directory(folder, overwrite=overwrite, inputs=[dataset, *(inputs or [])], kind="run") as tmp:
         extra_arrays = {} if est.radiance_sh is None else {"radiance_sh": est.radiance_sh}
         np.savez(os.path.join(tmp, "estimate.npz"), diffuse=est.diffuse, specular=est.specular, pseudo_sh=est.pseudo_sh,
                  sh_order=est.sh_order, labels=est.labels, observed=est.observed, **extra_arrays)
@@ -105,7 +106,7 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
     if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= RUN_FORMAT_VERSION:
         raise RunError(f"{js}: format_version {version!r} is not one this pseudolight reads (1 to {RUN_FORMAT_VERSION})")
     for key, kind in (("method", str), ("parameters", dict), ("dataset", str)):
-        if not isinstance(run.get(key), kind):
+        if not isinstance(run.get(key), kind) or (kind is str and not run[key]):
             raise RunError(f"{js}: '{key}' missing or not a {kind.__name__}")
     try:
         with np.load(npz, allow_pickle=False) as archive:
@@ -119,15 +120,27 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
     for key in ("diffuse", "specular", pseudo_key, "radiance_sh"):
         if key in data and not np.all(np.isfinite(data[key])):
             raise RunError(f"{npz}: {key} contains NaN or Inf")
-    f = data["diffuse"].shape[0]
-    if data["diffuse"].shape != (f, 3) or data["specular"].shape != (f, 3) or data["labels"].shape != (f,) \
+    f = data["diffuse"].shape[0] if data["diffuse"].ndim == 2 else -1
+    if f < 1 or data["diffuse"].shape != (f, 3) or data["specular"].shape != (f, 3) or data["labels"].shape != (f,) \
             or data["observed"].shape != (f,):
         raise RunError(f"{npz}: diffuse, specular (F, 3), labels and observed (F,) disagree in shape")
+    if not np.issubdtype(data["labels"].dtype, np.integer) or data["observed"].dtype != bool:
+        raise RunError(f"{npz}: labels must be integers and observed booleans, got {data['labels'].dtype} "
+                       f"and {data['observed'].dtype}")
+    for key in (pseudo_key, "radiance_sh"):
+        if key in data and (data[key].ndim != 2 or data[key].shape[1] != 3
+                            or int(np.sqrt(data[key].shape[0])) ** 2 != data[key].shape[0]):
+            raise RunError(f"{npz}: {key} must be ((L+1)^2, 3), got {data[key].shape}")
+    if "radiance_sh" in data and data["radiance_sh"].shape != data[pseudo_key].shape:
+        raise RunError(f"{npz}: radiance_sh and {pseudo_key} differ in shape")
     known = {field.name for field in dataclasses.fields(EstimatorConfig)}
     try:
         config = EstimatorConfig(**{k: v for k, v in run["parameters"].items() if k in known})
     except (TypeError, InputError) as exc:
         raise RunError(f"{js}: parameters: {exc}") from None
+    if data[pseudo_key].shape[0] != (config.sh_order + 1) ** 2:
+        raise RunError(f"{npz}: {pseudo_key} has {data[pseudo_key].shape[0]} coefficients, run.json's sh_order "
+                       f"{config.sh_order} needs {(config.sh_order + 1) ** 2}")
     est = Estimate(data["diffuse"], data["specular"], data[pseudo_key], data["labels"], data["observed"].astype(bool),
                    run["method"], config, {k: run[k] for k in ("timings",) if k in run},
                    data.get("radiance_sh"))

@@ -124,7 +124,9 @@ def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarr
     textured = trimesh.Trimesh(vertices, faces, process=False,
                                visual=trimesh.visual.TextureVisuals(uv=uvs, material=material))
     textured.export(os.path.join(folder, "mesh.glb"))
-    simple = trimesh.visual.material.SimpleMaterial(name="estimate", image=images["diffuse"])
+    # Kd 1 and Ks 0: viewers multiply map_Kd by Kd (trimesh's default Kd 0.4 would darken it)
+    simple = trimesh.visual.material.SimpleMaterial(name="estimate", image=images["diffuse"],
+                                                    diffuse=[255, 255, 255, 255], specular=[0, 0, 0, 255])
     obj_mesh = trimesh.Trimesh(vertices, faces, process=False,
                                visual=trimesh.visual.TextureVisuals(uv=uvs, material=simple))
     obj_mesh.export(os.path.join(folder, "mesh.obj"), mtl_name="material.mtl")

@@ -40,13 +40,13 @@ def snapshot(*paths) -> dict:
 
 def expect_error(capsys, argv, *needles, inputs=(), absent=(), code=2):
     """Run the CLI; assert the exit code, exactly one error line holding every needle,
-    no traceback, no '.partial' name, unchanged inputs and absent outputs."""
+    no traceback, no temporary-folder name, unchanged inputs and absent outputs."""
     before = snapshot(*inputs)
     assert main([str(a) for a in argv]) == code
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.startswith("pseudolight")]
     assert len(lines) == 1, err
-    assert "Traceback" not in err and ".partial" not in lines[0], err
+    assert "Traceback" not in err and "-partial-" not in lines[0], err
     for needle in needles:
         assert needle in lines[0], lines[0]
     assert snapshot(*inputs) == before
@@ -309,7 +309,7 @@ def test_filesystem_errors_are_one_line(copy, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(runs.np, "savez", disk_full)
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "No space left", str(tmp_path / "r"),
                  inputs=[ds], absent=[tmp_path / "r"])
-    assert not [n for n in os.listdir(tmp_path) if ".partial" in n]
+    assert not [n for n in os.listdir(tmp_path) if "-partial-" in n]
 
 
 def test_cameras_inside_the_mesh_warn(tmp_path, capsys):
@@ -323,31 +323,36 @@ def test_stale_partial_folders_are_removed(copy, tmp_path, capsys):
     ds, _, _ = copy
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    stale = tmp_path / f".r.partial-{dead.pid}-abcd"
+    stale = tmp_path / f".r.pseudolight-partial-{dead.pid}-abcd"
+    user = tmp_path / ".my notes.old-4000000-keep"   # a user folder that merely looks similar
+    user.mkdir()
+    (user / "file").write_text("keep")
+    odd = tmp_path / ".x.pseudolight-partial-99999999999999999999-a"
+    odd.mkdir()
     stale.mkdir()
     (stale / "estimate.npz").write_bytes(b"half")
     assert main(["estimate", str(ds), "-o", str(tmp_path / "r")]) == 0
-    assert not stale.exists()
+    assert not stale.exists() and (user / "file").read_text() == "keep" and odd.exists()
     capsys.readouterr()
 
 
 def test_sigterm_leaves_no_partial_output(tmp_path):
     spec = tmp_path / "slow.toml"
-    spec.write_text(open(MICRO).read().replace("count = 6", "count = 400").replace("width = 24", "width = 64")
-                    .replace("height = 24", "height = 64"))
+    spec.write_text(open(MICRO).read().replace("count = 6", "count = 3000").replace("width = 24", "width = 96")
+                    .replace("height = 24", "height = 96").replace("spp = 1", "spp = 4"))
     out = tmp_path / "d"
     proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "generate", str(spec), "-o", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
     deadline = time.time() + 60
-    while time.time() < deadline and not [n for n in os.listdir(tmp_path) if ".partial" in n]:
+    while time.time() < deadline and not [n for n in os.listdir(tmp_path) if "-partial-" in n]:
         time.sleep(0.1)
     time.sleep(0.5)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
     assert "terminated" in err and "Traceback" not in err
-    assert not out.exists() and not [n for n in os.listdir(tmp_path) if ".partial" in n]
+    assert not out.exists() and not [n for n in os.listdir(tmp_path) if "-partial-" in n]
 
 
 def test_internal_errors_keep_their_traceback(copy, tmp_path, monkeypatch):
@@ -376,3 +381,37 @@ def test_underdetermined_estimates_warn_and_fail_under_strict(tmp_path, capsys):
     # 6 views: per face (72 x 2 albedos + light) is still underdetermined, one cluster is not
     assert main(["estimate", str(many), "-o", str(tmp_path / "r3"), "--strict", "--method", "bilinear-clustered"]) == 0
     assert "underdetermined" not in capsys.readouterr().err
+
+
+def test_files_read_from_outside_the_dataset_are_inputs_too(copy, tmp_path, capsys):
+    ds, run, _ = copy
+    other = tmp_path / "other"
+    shutil.copytree(ds, other)
+    t = json.load(open(ds / "transforms.json"))
+    t["mesh_file_path"] = "../other/mesh.ply"
+    for frame in t["frames"]:
+        frame["file_path"] = "../other/" + frame["file_path"]
+    json.dump(t, open(ds / "transforms.json", "w"))
+    expect_error(capsys, ["estimate", ds, "-o", other, "--overwrite"], "the input", inputs=[ds, other])
+    # a baseline written over an input file is refused too
+    expect_error(capsys, ["report", run, "-o", tmp_path / "rep", "--no-mitsuba", "--write-baseline",
+                          run / "run.json"], "run.json", inputs=[run], absent=[tmp_path / "rep"])
+
+
+def test_malformed_estimate_and_regions_arrays(copy, capsys):
+    ds, run, _ = copy
+    out = run.parent / "rep2"
+    good = dict(np.load(run / "estimate.npz"))
+    for key, value, needle in (("diffuse", np.array(3.0), "disagree in shape"),
+                               ("pseudo_sh", np.ones((8, 3)), "pseudo_sh"),
+                               ("labels", np.full(80, np.nan), "labels must be integers"),
+                               ("observed", np.array(["a"] * 80), "observed")):
+        np.savez(run / "estimate.npz", **{**good, key: value})
+        expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "estimate.npz", needle,
+                     inputs=[run, ds], absent=[out])
+    np.savez(run / "estimate.npz", **good)
+    mats = dict(np.load(ds / "ground_truth" / "materials.npz"))
+    for regions in (np.full(80, np.nan), np.full(80, 10 ** 12)):
+        np.savez(ds / "ground_truth" / "materials.npz", **{**mats, "regions": regions})
+        expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "materials.npz", "regions",
+                     inputs=[run, ds], absent=[out])
