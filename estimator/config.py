@@ -131,12 +131,14 @@ class EstimatorConfig:
             (0 <= self.diffuse_quantile <= 1, "diffuse_quantile must lie in [0, 1]"),
             (self.robust_delta > 0, "robust_delta must be > 0"),
             (0 <= self.segment_min_shading < 1, "segment_min_shading must lie in [0, 1)"),
-            (self.segment_threshold > 0 and self.uniform_spread > 0, "segment_threshold and uniform_spread must be > 0"),
+            (self.segment_threshold > 0 and self.uniform_spread > 0,
+             "segment_threshold and uniform_spread must be > 0"),
             (0 <= self.recluster_min_shading < 1, "recluster_min_shading must lie in [0, 1)"),
             (0 < self.recluster_shading_percentile <= 100, "recluster_shading_percentile must lie in (0, 100]"),
             (self.lm_damping_start > 0 and self.lm_damping_max > self.lm_damping_start,
              "lm_damping_start must be > 0 and below lm_damping_max"),
-            (self.lm_damping_raise > 1 and self.lm_damping_lower > 1, "lm_damping_raise and lm_damping_lower must be > 1"),
+            (self.lm_damping_raise > 1 and self.lm_damping_lower > 1,
+             "lm_damping_raise and lm_damping_lower must be > 1"),
         ]
         for ok, message in checks:
             if not ok:

@@ -15,7 +15,7 @@ from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
 from .models import reflection_model
 from .pipeline import Prepared, prepare, with_config
-from .segmentation import albedo_features, quantile_color, segment
+from .segmentation import albedo_features, group_quantile, segment
 from .solver import BilinearResult, solve_bilinear
 from .errors import InputError
 
@@ -255,13 +255,11 @@ class BilinearSegmented(BilinearClustered):
         regions = int(face_group[in_solve].max()) + 1 if in_solve.any() else 0
         in_solve = seen & (face_group < regions)
         diffuse = np.where(np.isfinite(albedo), albedo, 0.0)
-        region_albedo = np.array([np.median(albedo[(face_group == r) & usable], axis=0)
-                                  if ((face_group == r) & usable).any() else np.full(3, np.nan)
-                                  for r in range(regions)]).reshape(-1, 3)
+        member = usable & in_solve
+        region_albedo = group_quantile(face_group[member], albedo[member], regions, 0.5, interpolate=True)
         if c.tie_regions and regions > 1:
             region_albedo = self._tie_regions(region_albedo, albedo, usable, face_group, edges, regions)
-        for r in range(regions):  # a uniform region shares one albedo
-            diffuse[face_group == r] = np.nan_to_num(region_albedo[r])
+        diffuse[in_solve] = np.nan_to_num(region_albedo[face_group[in_solve]])  # a uniform region shares one albedo
         shading = (prep.c_matrix @ result.light).mean(axis=1)
         observed = seen & (shading > 0.02 * max(float(np.percentile(shading[seen], 95)), 1e-30)) \
             & np.all(np.isfinite(albedo) | (face_group < regions)[:, None], axis=1)
@@ -302,7 +300,8 @@ class BilinearSegmented(BilinearClustered):
         flip = gi[cross] > gj[cross]
         diff = np.where(flip[:, None], la[j[cross]] - la[i[cross]], la[i[cross]] - la[j[cross]])
         keys, inverse = np.unique(pairs, axis=0, return_inverse=True)
-        sizes = np.array([np.sum(usable & (face_group == r)) for r in range(regions)], float)
+        member = usable & (face_group < regions)
+        sizes = np.bincount(face_group[member], minlength=regions).astype(float)
         base = np.log(np.maximum(region_albedo, 1e-30))
         out = region_albedo.copy()
         for c in range(region_albedo.shape[1]):
@@ -330,7 +329,7 @@ class BilinearSegmented(BilinearClustered):
         obs = prep.obs
         g = face_group[obs.face]
         spec = result.specular[g] * (prep.d_rows @ result.light)
-        radiance = quantile_color(obs.face, obs.rgb - spec, len(face_group), c.diffuse_quantile)
+        radiance = group_quantile(obs.face, obs.rgb - spec, len(face_group), c.diffuse_quantile)
         shade = prep.c_matrix @ result.light
         lum = shade.mean(axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -351,7 +350,7 @@ class BilinearSegmented(BilinearClustered):
         if regions:
             finite = np.all(np.isfinite(albedo) & (albedo > 0), axis=1)
             feat = albedo_features(np.where(finite[:, None], albedo, 1.0))
-            centres = np.array([np.median(feat[group == r], axis=0) for r in range(regions)])
+            centres = group_quantile(group[group >= 0], feat[group >= 0], regions, 0.5, interpolate=True)
             dist = np.max(np.abs(feat[:, None, :] - centres[None]), axis=2)
             near = (group < 0) & seen & finite & (dist.min(axis=1) < reach)
             group[near] = np.argmin(dist[near], axis=1)

@@ -7,6 +7,7 @@ import numpy as np
 
 from .data import TriangleMesh, View
 from .raycast import RayCaster
+from .segmentation import group_quantile
 from .errors import InputError
 
 
@@ -41,19 +42,7 @@ class Observations:
 
     def median_color(self) -> np.ndarray:
         """(F, 3) per-face median colour over its rows (NaN for unseen faces)."""
-        out = np.full((self.num_faces, 3), np.nan)
-        if len(self.face) == 0:
-            return out
-        counts = np.bincount(self.face, minlength=self.num_faces)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        seen = counts > 0
-        lo = starts[seen] + (counts[seen] - 1) // 2
-        hi = starts[seen] + counts[seen] // 2
-        for c in range(3):
-            order = np.lexsort((self.rgb[:, c], self.face))
-            values = self.rgb[order, c]
-            out[seen, c] = 0.5 * (values[lo] + values[hi])
-        return out
+        return group_quantile(self.face, self.rgb, self.num_faces, 0.5, interpolate=True)
 
 
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 1,

@@ -13,21 +13,27 @@ from scipy.sparse.csgraph import connected_components
 from .clustering import mean_shift
 
 
-def quantile_color(face: np.ndarray, rgb: np.ndarray, num_faces: int, q: float) -> np.ndarray:
-    """(F, 3) per-face, per-channel ``q``-quantile (lower neighbour) of observation colours
-    (N, 3) of faces (N,); NaN where a face has no observation.
+def group_quantile(group: np.ndarray, values: np.ndarray, num_groups: int, q: float,
+                   interpolate: bool = False) -> np.ndarray:
+    """(G, C) per-group, per-column ``q``-quantile of ``values`` (N, C) whose rows belong to
+    ``group`` (N,); NaN for a group with no row. One sort per column, no loop over groups.
 
-    Specular reflection only adds light, so a low quantile over views is the
-    view-independent diffuse radiance with the highlights left out.
+    The lower neighbour of the quantile's position, or with ``interpolate`` the linear
+    interpolation between its neighbours (numpy's default: q = 0.5 is ``np.median``).
+    With faces as groups and observation colours as values, a low quantile over views is
+    the view-independent diffuse radiance (specular reflection only adds light).
     """
-    out = np.full((num_faces, rgb.shape[1]), np.nan)
-    counts = np.bincount(face, minlength=num_faces)
+    out = np.full((num_groups, values.shape[1]), np.nan)
+    counts = np.bincount(group, minlength=num_groups)
     seen = counts > 0
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    pick = starts[seen] + np.floor(q * (counts[seen] - 1)).astype(np.int64)
-    for c in range(rgb.shape[1]):
-        order = np.lexsort((rgb[:, c], face))
-        out[seen, c] = rgb[order, c][pick]
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])[seen]
+    position = q * (counts[seen] - 1)
+    lo = starts + np.floor(position).astype(np.int64)
+    hi = starts + np.ceil(position).astype(np.int64) if interpolate else lo
+    frac = position - np.floor(position)
+    for c in range(values.shape[1]):
+        ordered = values[np.lexsort((values[:, c], group)), c]
+        out[seen, c] = ordered[lo] + frac * (ordered[hi] - ordered[lo])
     return out
 
 
@@ -63,16 +69,9 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray, threshold:
     graph = sparse.csr_matrix((np.ones(close.sum()), (e0[close], e1[close])), shape=(f, f))
     _, comp = connected_components(graph, directed=False)
     ids, inverse, counts = np.unique(comp[valid], return_inverse=True, return_counts=True)
-    order = np.argsort(inverse, kind="stable")
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    values = feat[valid][order]
-    medians, spreads = [], []
-    for start, count in zip(starts, counts):
-        part = values[start:start + count]
-        med = np.median(part, axis=0)
-        medians.append(med)
-        spreads.append(float(np.max(np.median(np.abs(part - med), axis=0))))
-    medians, spreads = np.array(medians), np.array(spreads)
+    values = feat[valid]
+    medians = group_quantile(inverse, values, len(ids), 0.5, interpolate=True)
+    spreads = group_quantile(inverse, np.abs(values - medians[inverse]), len(ids), 0.5, interpolate=True).max(axis=1)
     uniform = (counts >= min_size) & (spreads < uniform_spread)
     labels = np.full(f, -1, dtype=np.int64)
     if not uniform.any():
@@ -83,5 +82,5 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray, threshold:
     labels[valid] = region_of_component[inverse]
     present, compact = np.unique(labels[labels >= 0], return_inverse=True)
     labels[labels >= 0] = compact
-    region_medians = np.array([np.median(albedo[labels == r], axis=0) for r in range(len(present))])
-    return labels, region_medians
+    inside = labels >= 0
+    return labels, group_quantile(labels[inside], albedo[inside], len(present), 0.5, interpolate=True)

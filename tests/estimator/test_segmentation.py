@@ -2,15 +2,15 @@
 import numpy as np
 
 from estimator.methods import BilinearSegmented
-from estimator.segmentation import albedo_features, quantile_color, segment
+from estimator.segmentation import albedo_features, group_quantile, segment
 from harness.scene.geometry import icosphere
 
 
-def test_quantile_color_matches_numpy():
+def test_group_quantile_matches_numpy():
     rng = np.random.default_rng(0)
     face = rng.integers(0, 7, 80)
     rgb = rng.random((80, 3))
-    out = quantile_color(face, rgb, 9, 0.25)
+    out = group_quantile(face, rgb, 9, 0.25)
     for f in range(9):
         rows = rgb[face == f]
         if len(rows) == 0:
