@@ -292,24 +292,19 @@ def cmd_render(args) -> int:
     from estimator.forward import Predictor
     from estimator.sh import axis_angle_matrix
 
+    from harness.cli.reporting import open_run
     from harness.io.atomic import atomic_directory
-    from harness.io.dataset import read_dataset
     from harness.io.exr import write_exr
-    from harness.io.runs import read_run
 
     rotation = _rotation("--rotate-illumination", args.rotate_illumination)
-    est, run = read_run(args.run)
-    dataset = args.dataset or run["dataset"]
-    check_output(args.output, [args.run, dataset], args.overwrite)
-    ds = read_dataset(dataset, load_truth=False)
-    check_output(args.output, [args.run, *ds.inputs], args.overwrite)
+    est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite)
     views = {"test": ds.data.test_views, "train": ds.data.views,
              "all": ds.data.views + ds.data.test_views}[args.frames]
     if not views:
         raise InputError(f"the dataset {ds.path} has no {args.frames} frames")
     rotation = None if rotation is None else axis_angle_matrix(*rotation)
     predictor = Predictor(ds.data.mesh, est)
-    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, *ds.inputs], kind="render") as tmp:
+    with atomic_directory(args.output, overwrite=args.overwrite, inputs=inputs, kind="render") as tmp:
         for view in views:
             rgb, coverage = predictor.predict(view.camera, rotation)
             name = os.path.splitext(os.path.basename(view.name))[0] + ".exr"
@@ -319,22 +314,14 @@ def cmd_render(args) -> int:
 
 
 def cmd_export_texture(args) -> int:
+    from harness.cli.reporting import open_run
     from harness.io.atomic import atomic_directory
-    from harness.io.dataset import read_dataset
     from harness.io.mesh import load_mesh_with_uv
-    from harness.io.runs import read_run
     from harness.io.texture import export_textures
 
-    est, run = read_run(args.run)
-    dataset = args.dataset or run["dataset"]
-    check_output(args.output, [args.run, dataset], args.overwrite)
-    ds = read_dataset(dataset, load_test=False, load_truth=False)
-    check_output(args.output, [args.run, *ds.inputs], args.overwrite)
-    if ds.data.mesh.num_faces != est.diffuse.shape[0]:
-        raise InputError(f"the run {args.run} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
-                         f"{ds.data.mesh.num_faces}")
+    est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite, load_test=False)
     _, uv = load_mesh_with_uv(os.path.join(ds.path, ds.meta.get("mesh_file_path", "mesh.ply")))
-    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.run, *ds.inputs], kind="texture") as tmp:
+    with atomic_directory(args.output, overwrite=args.overwrite, inputs=inputs, kind="texture") as tmp:
         summary = export_textures(tmp, ds.data.mesh, est, uv, args.size)
     print(f"{summary['faces']} faces, {summary['size']}x{summary['size']} textures ({summary['uv_source']} UVs) "
           f"written to {os.path.abspath(args.output)}")

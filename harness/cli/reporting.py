@@ -25,6 +25,23 @@ from harness.scene.export import export_scene, render_estimate
 from harness.scene.relight import render_truth
 
 
+def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: bool, load_test: bool = True,
+             load_truth: bool = False):
+    """(estimate, run.json, dataset, inputs) of a run and the dataset it is read against
+    (default: the one it was made from), after checking that ``out_dir`` touches none of
+    their files and that the run's faces are the mesh's."""
+    est, run = read_run(run_dir)
+    dataset_dir = dataset_dir or run["dataset"]
+    check_output(out_dir, [run_dir, dataset_dir], overwrite)
+    ds = read_dataset(dataset_dir, load_test=load_test, load_truth=load_truth)
+    inputs = [run_dir, *ds.inputs]
+    check_output(out_dir, inputs, overwrite)   # the mesh and images may lie outside the dataset folder
+    if ds.data.mesh.num_faces != est.diffuse.shape[0]:
+        raise InputError(f"the run {run_dir} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
+                         f"{ds.data.mesh.num_faces}")
+    return est, run, ds, inputs
+
+
 def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rotation=("y", 90.0),
                  cross_check_spp: int | None = None, mitsuba: bool = True, baseline: dict | None = None,
                  overwrite: bool = False, log=print) -> tuple[dict, list[dict] | None]:
@@ -36,16 +53,9 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     Returns (metrics, regression rows or None).
     """
     t0 = time.perf_counter()
-    est, run = read_run(run_dir)
-    dataset_dir = dataset_dir or run["dataset"]
-    check_output(out_dir, [run_dir, dataset_dir], overwrite)
-    ds = read_dataset(dataset_dir)
-    check_output(out_dir, [run_dir, *ds.inputs], overwrite)
+    est, run, ds, inputs = open_run(run_dir, dataset_dir, out_dir, overwrite, load_truth=True)
     if ds.ground_truth is None:
         raise InputError(f"{ds.path} has no ground_truth/: a report compares with ground truth")
-    if ds.data.mesh.num_faces != est.diffuse.shape[0]:
-        raise InputError(f"the run {run_dir} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
-                         f"{ds.data.mesh.num_faces}")
     recorded = run.get("fingerprint")
     if isinstance(recorded, dict):
         current = fingerprint(ds.data)
@@ -76,7 +86,7 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     regressions = check(m, baseline) if baseline is not None else None
     m["report_seconds"] = time.perf_counter() - t0
 
-    with atomic_directory(out_dir, overwrite=overwrite, inputs=[run_dir, *ds.inputs], kind="report") as tmp:
+    with atomic_directory(out_dir, overwrite=overwrite, inputs=inputs, kind="report") as tmp:
         dump_json(os.path.join(tmp, "metrics.json"), m)
         np.savez(os.path.join(tmp, "ratios.npz"), **content.ratios)
         for index, (section, _, png) in enumerate(content.figures):

@@ -14,12 +14,12 @@ from estimator.data import TriangleMesh
 from estimator.raycast import RayCaster
 from reports.ground_truth import GroundTruth
 
-from harness.io.mesh import load_mesh_with_uv
-from harness.scene import geometry
 from harness.io.atomic import atomic_directory
 from harness.io.dataset import write_dataset, write_ground_truth
-from harness.scene.illumination import Illumination, build_illumination
 from harness.io.images import read_linear_rgb
+from harness.io.mesh import load_mesh_with_uv
+from harness.scene import geometry
+from harness.scene.illumination import Illumination, build_illumination
 from harness.scene.render import build_scene, make_cameras, render_views
 from harness.scene.spec import AlbedoSpec, SceneSpec, SpecError
 from harness.scene.textures import region_labels, spherical_texture_average, uv_texture_average
