@@ -126,3 +126,11 @@ def set_variant(variant: str | None = None):
 def active_variant() -> str | None:
     """The variant chosen in this process, or None before :func:`set_variant`."""
     return _chosen
+
+
+def set_thread_count(threads: int) -> None:
+    """Dr.Jit's worker threads for the CPU variant (one pool per process; a benchmark worker
+    of N sharing C cores takes C // N)."""
+    import drjit as dr
+
+    dr.set_thread_count(max(1, int(threads)))

@@ -8,9 +8,11 @@ import numpy as np
 
 from .errors import InputError
 from .sh import phong_filter
+
 COMPONENTS = ("both", "specular", "diffuse")
 DIFFUSE_LIGHTS = ("pseudo", "defiltered")
 SPECULAR_MODELS = ("mirror", "lobe")
+LOSSES = ("auto", "none", "huber", "cauchy", "tukey")
 
 
 @dataclass
@@ -59,14 +61,20 @@ class EstimatorConfig:
         divisor after an accepted one, and the damping at which a step is given up
         (Madsen, Nielsen & Tingleff's usual values; raising by more than lowering
         keeps the solver from oscillating between the two).
-    robust_delta : ``bilinear-segmented`` weights an observation by Huber's rule with this
-        threshold, relative to the median observed colour (what the model does not explain,
-        interreflected highlights or a lobe that is not Phong, counts as an outlier).
     diffuse_quantile : ``bilinear-segmented`` takes a face's diffuse radiance as this
         quantile of its colours (less the fitted specular) over the views.
     segment_threshold, uniform_spread : neighbours whose log-albedos differ by less than
         ``segment_threshold`` join one region; a region is uniform (its faces share one
         albedo) when its log-albedo spread is below ``uniform_spread``.
+    robust_loss : M-estimator of the iteratively reweighted solve ('none': least squares,
+        the paper; 'huber', 'cauchy' or 'tukey'; 'auto': the method's own, least squares
+        for the paper's methods, Cauchy for ``bilinear-segmented``), on residuals relative to the face's
+        median colour (:mod:`estimator.robust`).
+    robust_rounds : reweighting rounds (each one more bilinear solve).
+    glint_ratio : before the first robust solve, a row brighter than this x its face's
+        median colour is clipped to that level (a glint must not set the first light).
+    relabel_rounds : ``bilinear-segmented`` moves boundary faces to the neighbouring region
+        that best predicts their observations, then solves again, up to this many times.
     tie_regions : ``bilinear-segmented`` makes the regions' albedo ratios agree with the
         radiance ratios across their boundaries (neighbours see the same light).
     segment_min_shading : ``bilinear-segmented`` segments faces whose diffuse shading is at
@@ -100,12 +108,16 @@ class EstimatorConfig:
     lm_damping_raise: float = 4.0
     lm_damping_lower: float = 3.0
     lm_damping_max: float = 1e8
-    robust_delta: float = 0.05
     diffuse_quantile: float = 0.25
     segment_threshold: float = 0.12
     uniform_spread: float = 0.08
     segment_min_shading: float = 0.05
     tie_regions: bool = True
+    relabel_rounds: int = 3
+    relabel_free_ratio: float = 3.0
+    robust_loss: str = "auto"
+    robust_rounds: int = 2
+    glint_ratio: float = 4.0
     variant: str | None = None
 
     def __post_init__(self):
@@ -129,7 +141,11 @@ class EstimatorConfig:
             (0 < self.min_coverage <= 1, "min_coverage must lie in (0, 1]"),
             (self.negative_tolerance >= 0, "negative_tolerance must be >= 0"),
             (0 <= self.diffuse_quantile <= 1, "diffuse_quantile must lie in [0, 1]"),
-            (self.robust_delta > 0, "robust_delta must be > 0"),
+            (self.robust_loss in LOSSES, f"robust_loss must be one of {LOSSES}"),
+            (self.robust_rounds >= 0, "robust_rounds must be >= 0"),
+            (self.glint_ratio > 1, "glint_ratio must be > 1"),
+            (self.relabel_rounds >= 0, "relabel_rounds must be >= 0"),
+            (self.relabel_free_ratio >= 1, "relabel_free_ratio must be >= 1"),
             (0 <= self.segment_min_shading < 1, "segment_min_shading must lie in [0, 1)"),
             (self.segment_threshold > 0 and self.uniform_spread > 0,
              "segment_threshold and uniform_spread must be > 0"),

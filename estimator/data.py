@@ -156,6 +156,8 @@ class Estimate:
     radiance_sh : (M, 3) radiance L (unit DC) when the reflection model solves for it
         (``specular_model='lobe'``: h = L x Phong filter loses the degrees where the
         filter vanishes); else None.
+    face_stats : per-face trust arrays (:func:`estimator.trust.diagnose`): ``observations``
+        (F,) kept rows, ``albedo_se`` (F, 3) standard error of the diffuse albedo.
     """
 
     diffuse: np.ndarray
@@ -167,6 +169,7 @@ class Estimate:
     config: EstimatorConfig
     info: dict = field(default_factory=dict)
     radiance_sh: np.ndarray | None = None
+    face_stats: dict = field(default_factory=dict)
 
     @property
     def model(self) -> "ReflectionModel":

@@ -22,6 +22,7 @@ class Observations:
     view_dir : (N, 3) unit direction from the face centroid to the camera.
     num_faces, num_views : int
     rejected : (num_views,) int64 object pixels dropped per view as negative beyond noise.
+    view : (N,) int64 view of each row (None when unknown).
     """
 
     face: np.ndarray
@@ -30,11 +31,12 @@ class Observations:
     num_faces: int
     num_views: int
     rejected: np.ndarray | None = None
+    view: np.ndarray | None = None
 
     def subset(self, keep: np.ndarray) -> "Observations":
         """The rows where ``keep`` (N,) is true."""
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
-                            self.rejected)
+                            self.rejected, None if self.view is None else self.view[keep])
 
     def observed_faces(self) -> np.ndarray:
         """(F,) bool: faces with at least one row."""
@@ -64,7 +66,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     centroids = mesh.centroids
     parts, rejected = [], []
     buffers = caster.face_id_buffers([v.camera for v in views], pure=pure_pixels)
-    for view, ids in zip(views, buffers):
+    for index, (view, ids) in enumerate(zip(views, buffers)):
         ids = ids.ravel()
         valid = ids >= 0
         if view.alpha is not None:
@@ -81,12 +83,13 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         faces = np.nonzero(counts >= max(min_pixels, 1))[0]
         to_cam = view.camera.center[None] - centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
-        parts.append((faces, sums[faces] / counts[faces, None], to_cam))
+        parts.append((faces, sums[faces] / counts[faces, None], to_cam, np.full(len(faces), index)))
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
     if len(blind) == len(views):
         raise InputError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
     if blind:
         raise InputError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
-    face, rgb, view_dir = (np.concatenate(p) for p in zip(*parts))
-    return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64))
+    face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
+    return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
+                        view_index.astype(np.int64))

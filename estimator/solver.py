@@ -23,6 +23,7 @@ class BilinearResult:
         radiance L), DC coefficient 1 per channel (the scale gauge).
     residuals : relative residual ||R - model|| / ||R|| after each ALS step, then after LM.
     lm_residuals : per channel, the channel's relative residual after each accepted LM step.
+    weights : (N,) the observations' weights in the final solve (set by robust callers).
     """
 
     diffuse: np.ndarray
@@ -30,6 +31,7 @@ class BilinearResult:
     light: np.ndarray
     residuals: list[float] = field(default_factory=list)
     lm_residuals: list[list[float]] = field(default_factory=list)
+    weights: np.ndarray | None = None
 
 
 def _solve_albedos(r, a, b, group, num_groups, components, ridge=1e-12):
@@ -123,8 +125,8 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
 def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_rows: np.ndarray,
                    num_groups: int, components: str = "both", iterations: int = 20, tol: float = 1e-6,
                    fixed_light: np.ndarray | None = None, ridge: float = 1e-9,
-                   als_iterations: int = 5, schedule: tuple[float, float, float, float] = LM_SCHEDULE
-                   ) -> BilinearResult:
+                   als_iterations: int = 5, schedule: tuple[float, float, float, float] = LM_SCHEDULE,
+                   initial_light: np.ndarray | None = None) -> BilinearResult:
     """Solve the bilinear system: alternating least squares, then Levenberg-Marquardt.
 
     The model of observation k (face i in group g, one colour channel) is
@@ -148,6 +150,8 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
     ridge : Tikhonov weight of the ALS light step, relative to the mean diagonal.
     als_iterations : ALS steps before Levenberg-Marquardt.
     schedule : Levenberg-Marquardt damping (start, raise, lower, max).
+    initial_light : (M, 3) start of the light (a previous solve's): one ALS step replaces
+        ``als_iterations`` before Levenberg-Marquardt.
 
     Returns
     -------
@@ -162,6 +166,11 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
     h[0] = 1.0
     if fixed_light is not None:
         h = np.array(fixed_light, dtype=np.float64)
+    elif initial_light is not None:
+        if initial_light.shape != (m, 3):
+            raise InputError(f"solve_bilinear: initial_light must be ({m}, 3), got {initial_light.shape}")
+        h = np.array(initial_light, dtype=np.float64)
+        als_iterations = 1
     td, ts = np.zeros((num_groups, 3)), np.zeros((num_groups, 3))
     norm = max(float(np.linalg.norm(rgb)), 1e-300)
     residuals: list[float] = []

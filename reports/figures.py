@@ -137,3 +137,24 @@ def compare_histograms(entries: list[tuple[str, np.ndarray]], component: str) ->
     ax.set_xlabel("ratio (clipped to [0, 2])")
     ax.legend(fontsize=7)
     return _png(fig)
+
+
+def sweep_panels(axis: str, panels: list[tuple[str, dict]]) -> bytes:
+    """One row of plots, a metric each: (metric label, label -> (x, mean, min, max)); a line
+    per label with its min-max band. Non-numeric axis values are placed in order."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.2), squeeze=False)
+    for ax, (metric, series) in zip(axes[0], panels):
+        for label, (xs, mean, lo, hi) in series.items():
+            try:
+                pos = [float(x) for x in xs]
+            except (TypeError, ValueError):
+                pos = list(range(len(xs)))
+                ax.set_xticks(pos, [str(x) for x in xs], rotation=30, fontsize=7)
+            ax.plot(pos, mean, marker="o", label=label)
+            ax.fill_between(pos, lo, hi, alpha=0.2)
+        ax.set_xlabel(axis, fontsize=8)
+        ax.set_title(metric, fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    return _png(fig)

@@ -61,7 +61,8 @@ def terminal_summary(metrics: dict) -> str:
     return "\n".join([head, "-" * len(head)] + [f"{label:<{width}}  {value}" for label, value in rows])
 
 
-def _img(png: bytes, alt: str) -> str:
+def embed_png(png: bytes, alt: str) -> str:
+    """An <img> tag holding the PNG as a data URI."""
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode()}">'
 
 
@@ -97,7 +98,7 @@ def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regression
         if sec != section:
             parts.append(f"<h2>{html.escape(sec)}</h2>")
             section = sec
-        parts.append(f"<figure>{_img(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
+        parts.append(f"<figure>{embed_png(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
     parts.append("<h2>All metrics</h2><pre>" + html.escape(json.dumps(metrics, indent=1)) + "</pre></body></html>")
     return "\n".join(parts)
 
@@ -125,5 +126,5 @@ def compare_page(rows: list[dict], columns: list[tuple[str, str]], figures: list
         parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     parts.append("</table>")
     for caption, png in figures:
-        parts.append(f"<figure>{_img(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
+        parts.append(f"<figure>{embed_png(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
     return "\n".join(parts + ["</body></html>"])

@@ -114,6 +114,12 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
+def srgb_decode(encoded: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`srgb_encode`: sRGB-encoded values in [0, 1] -> linear values."""
+    x = np.asarray(encoded, dtype=np.float64)
+    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
+
+
 def tonemap(linear: np.ndarray, exposure: float) -> np.ndarray:
     """The report's tone map: sRGB encoding of min(1, x / exposure)."""
     return srgb_encode(np.asarray(linear, float) / max(exposure, 1e-300))

@@ -67,7 +67,23 @@ def _overrides(args) -> dict:
         out["render.spp"] = args.spp
     if args.seed is not None:
         out["seed"] = args.seed
+    for item in args.set or []:
+        out.update([_dotted_value(item)])
     return out
+
+
+def _dotted_value(item: str) -> tuple[str, object]:
+    """KEY=VALUE of ``--set`` -> (dotted key, value parsed as a TOML value, else the text)."""
+    import tomllib
+
+    key, sep, text = item.partition("=")
+    if not sep or not key.strip():
+        raise InputError(f"--set needs KEY=VALUE (a dotted scene-spec key), got {item!r}")
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    return key.strip(), value
 
 
 def _rotation(flag: str, values) -> tuple[str, float] | None:
@@ -198,13 +214,19 @@ def cmd_compare(args) -> int:
 
 def cmd_suite(args) -> int:
     from harness.cli.reporting import print_table
-    from harness.cli.suite import load_suite, run_suite
+    from harness.sweep.runner import run_sweep
+    from harness.sweep.suite import load_suite
 
-    suite = load_suite(args.suite)
+    suite = load_suite(args.suite, args.profile)
     check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
-    rows = run_suite(suite, args.output, args.profile, not args.no_mitsuba, args.overwrite, log=_err)
-    print_table(rows)
-    print(f"comparison: {os.path.abspath(os.path.join(args.output, 'compare', 'compare.html'))}")
+    summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
+                        not args.no_mitsuba, args.variant, log=_err)
+    print_table([{**r, "scene": f"{r['scene']} {json.dumps(r['axes']) if r['axes'] else ''}".strip(),
+                  "method": r["label"]} for r in summary["rows"]])
+    print(f"{summary['datasets']} datasets, {summary['runs']} runs: {summary['executed']} jobs run, "
+          f"{summary['reused']} reused, {summary['seconds']:.1f} s\n"
+          f"comparison: {os.path.abspath(os.path.join(args.output, 'compare', 'compare.html'))}\n"
+          f"sweep plots: {os.path.abspath(os.path.join(args.output, 'compare', 'sweep.html'))}")
     return 0
 
 
@@ -268,7 +290,19 @@ def cmd_estimate(args) -> int:
             raise InputError(f"method {method} needs the true light, and {source} has no ground_truth/ "
                              "(pass --truth DATASET)")
         known = truth.known_light()
-    est = estimate(ds.data, method, config, **known, log=lambda m: _err(f"  {m}"), exponent_candidates=candidates)
+    if args.holdout_views:
+        from estimator.validation import holdout_indices
+        holdout_indices(len(ds.data.views), args.holdout_views)   # refuse a bad count before solving
+    say = lambda m: _err(f"  {m}")  # noqa: E731
+    est = estimate(ds.data, method, config, **known, log=say, exponent_candidates=candidates)
+    if args.holdout_views:
+        from estimator.validation import cross_validate
+        cv = cross_validate(ds.data, args.holdout_views,
+                            lambda data: estimate(data, method, config, **known, exponent_candidates=candidates))
+        est.info["cross_validation"] = cv
+        psnr = "-" if cv["psnr"] is None else f"{cv['psnr']:.2f}"
+        _err(f"  cross-validation: {len(cv['held_out'])} views held out, prediction PSNR {psnr} dB")
+    _print_trust(est)
     for name, count in est.info.get("rejected_pixels", {}).items():
         _err(f"warning: {name}: {count} pixels negative beyond noise were left out")
     for line in est.info.get("warnings", []):
@@ -286,6 +320,21 @@ def cmd_estimate(args) -> int:
         _err(f"pseudolight: --strict: {len(est.info['warnings'])} warning(s); the run is written, exit 3")
         return 3
     return 0
+
+
+def _print_trust(est) -> None:
+    """The short trust summary of an estimate (stderr)."""
+    trust = est.info.get("trust")
+    if not trust:
+        return
+    dof = est.info.get("degrees_of_freedom") or {}
+    se = trust.get("albedo_relative_se") or {}
+    cond = trust.get("light_condition")
+    _err(f"  trust: {dof.get('observations', '?')} observations for {dof.get('unknowns', '?')} unknowns; "
+         f"median relative residual {100 * (trust['residual']['median_relative'] or 0):.1f} %, "
+         f"{100 * trust['outlier_share']:.1f} % outliers; light condition "
+         f"{'inf' if cond is None else f'{cond:.3g}'}; albedo relative standard error median "
+         f"{100 * se.get('median', float('nan')):.2f} %, p90 {100 * se.get('p90', float('nan')):.2f} %")
 
 
 def cmd_render(args) -> int:
@@ -348,7 +397,7 @@ def _add_estimator_flags(p) -> None:
     from estimator.config import COMPONENTS, DIFFUSE_LIGHTS, SPECULAR_MODELS
 
     p.add_argument("--method", help="registered method (default: the dataset's recommendation, "
-                                    "else bilinear-clustered)")
+                                    "else bilinear-segmented)")
     p.add_argument("--components", choices=COMPONENTS)
     p.add_argument("--sh-order", type=int)
     p.add_argument("--directions", type=int, help="sample directions of the shadow function (paper: 1164)")
@@ -387,6 +436,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--spp", type=_positive_int, help="samples per pixel")
     g.add_argument("--seed", type=_count)
     g.add_argument("--variant", choices=VARIANTS + ("auto",))
+    g.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override any spec key, e.g. --set faults.noise_read=0.05 (repeatable; TOML values)")
     g.add_argument("--overwrite", action="store_true", help="replace an existing dataset folder")
     g.add_argument("--json", action="store_true", help="print the summary as JSON")
     g.set_defaults(func=cmd_generate)
@@ -396,7 +447,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("-o", "--output", required=True, help="run folder to create")
     e.add_argument("--overwrite", action="store_true")
     e.add_argument("--strict", action="store_true",
-                   help="exit with code 3 when the estimate warns (underdetermined, faces without views)")
+                   help="exit with code 3 when the estimate warns (underdetermined, ill-conditioned, outlier "
+                        "view, high residual, faces without views)")
+    e.add_argument("--holdout-views", type=_positive_int, metavar="K",
+                   help="also solve without K evenly spread views and record the prediction PSNR on them "
+                        "(cross-validation, in run.json)")
     e.add_argument("--truth", metavar="DATASET", help="dataset whose ground_truth/ gives the known light of the "
                                                       "known-illumination oracle (default: the dataset itself)")
     _add_estimator_flags(e)
@@ -432,12 +487,20 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--overwrite", action="store_true")
     cp.set_defaults(func=cmd_compare)
 
-    su = sub.add_parser("suite", help="benchmark runner: scenes x methods -> datasets, runs, reports, comparison")
-    su.add_argument("suite", help="suite TOML, or a name under scenes/suites/ (e.g. methods)")
+    su = sub.add_parser("suite", aliases=["bench"],
+                        help="benchmark sweeps: scenes x sweep points x seeds x methods -> cached datasets, runs, "
+                             "reports, comparison and sweep plots")
+    su.add_argument("suite", help="suite TOML, or a name under scenes/suites/ (e.g. smoke, paper, robustness)")
     su.add_argument("-o", "--output", required=True)
     su.add_argument("--profile", help="scene profile for every dataset (e.g. tiny, benchmark)")
     su.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba cross-check in the reports")
-    su.add_argument("--overwrite", action="store_true", help="render the datasets again")
+    su.add_argument("--force", "--overwrite", action="store_true", dest="force",
+                    help="redo every job (finished jobs are otherwise reused)")
+    su.add_argument("--jobs", type=_positive_int, default=1,
+                    help="worker processes (spawned; Dr.Jit threads split between them)")
+    su.add_argument("--executor", choices=("local", "dask"), default="local")
+    su.add_argument("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (--executor dask)")
+    su.add_argument("--variant", choices=VARIANTS)
     su.set_defaults(func=cmd_suite)
 
     tx = sub.add_parser("export-texture", help="an estimate as texture maps: UV atlas, PNG/EXR, OBJ+MTL, glTF")

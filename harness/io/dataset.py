@@ -11,11 +11,13 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
+from PIL import Image
 
 from estimator.camera import Camera
 from estimator.errors import InputError
 from estimator.data import MultiViewData, TriangleMesh, View
 from reports.ground_truth import GroundTruth
+from reports.metrics import srgb_decode
 
 from harness.io.exr import read_exr, write_exr
 from harness.io.jsonio import load_json
@@ -52,13 +54,16 @@ def _frame_json(camera: Camera, file_path: str) -> dict:
 
 def write_dataset(folder: str, mesh: TriangleMesh, views: list[tuple[Camera, np.ndarray]],
                   test_views: list[tuple[Camera, np.ndarray]], meta: dict | None = None,
-                  half: bool = False) -> None:
+                  half: bool = False, ldr: list[np.ndarray | None] | None = None) -> None:
     """Write transforms.json, mesh.ply and images/ into an (empty) folder.
 
     Parameters
     ----------
     views, test_views : lists of (camera, (H, W, 4) RGBA linear image); all cameras share intrinsics.
     meta : extra top-level keys for transforms.json (e.g. the scene name).
+    ldr : per training view, an (H, W, 4) uint8 sRGB RGBA image or None: the frame then
+        points at it as PNG (what a camera's 8-bit output holds), the EXR kept as
+        ``hdr_file_path``.
     """
     cams = [c for c, _ in views + test_views]
     first = cams[0]
@@ -71,7 +76,13 @@ def write_dataset(folder: str, mesh: TriangleMesh, views: list[tuple[Camera, np.
         for k, (cam, image) in enumerate(items):
             rel = f"images/{prefix}_{k:03d}.exr"
             write_exr(os.path.join(folder, rel), image, half=half)
-            out.append(_frame_json(cam, rel))
+            low = ldr[k] if ldr is not None and prefix == "train" else None
+            if low is None:
+                out.append(_frame_json(cam, rel))
+                continue
+            png = f"images/{prefix}_{k:03d}.png"
+            Image.fromarray(low, "RGBA").save(os.path.join(folder, png))
+            out.append({**_frame_json(cam, png), "hdr_file_path": rel})
     save_mesh_ply(mesh, os.path.join(folder, "mesh.ply"))
     transforms = {
         "format": FORMAT_NAME,
@@ -147,6 +158,26 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
         raise DatasetError(f"{where}: {exc}") from None
 
 
+LDR_FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
+
+
+def read_frame_image(path: str) -> np.ndarray:
+    """A frame's image as float32 (H, W, 3 or 4): EXR as stored (linear); an 8-bit PNG or
+    JPEG as sRGB-encoded, linearised to [0, 1] (alpha linear)."""
+    if os.path.splitext(path)[1].lower() not in LDR_FRAME_EXTENSIONS:
+        return read_exr(path)
+    try:
+        with Image.open(path) as im:
+            im = im.convert("RGBA" if im.mode in ("RGBA", "LA", "PA") or "transparency" in im.info else "RGB")
+            raw = np.asarray(im, dtype=np.float64) / 255.0
+    except (OSError, ValueError) as exc:
+        raise DatasetError(f"cannot read image {path}: {exc}") from None
+    out = srgb_decode(raw)
+    if raw.shape[2] == 4:
+        out[..., 3] = raw[..., 3]
+    return out.astype(np.float32)
+
+
 def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[View]:
     """The views of a frame list; every image path read is appended to ``files``."""
     if not isinstance(frames, list):
@@ -164,7 +195,7 @@ def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[V
             path += ".exr"
         if not os.path.isfile(path):
             raise DatasetError(f"{where}: image not found: {path}")
-        image = read_exr(path)
+        image = read_frame_image(path)
         alpha = image[..., 3] if image.shape[2] == 4 else None
         try:
             views.append(View(frame["file_path"], cam, image[..., :3], alpha))

@@ -12,6 +12,7 @@ from estimator import sh
 from estimator.config import EstimatorConfig
 from estimator.data import Estimate
 from estimator.errors import InputError
+from estimator.methods import DEFAULT_METHOD
 
 from harness.io.atomic import atomic_directory
 from harness.io.exr import write_exr
@@ -34,7 +35,7 @@ def estimator_settings(meta: dict, method: str | None = None, overrides: dict | 
     if not isinstance(defaults, dict):
         raise InputError(f"transforms.json estimator_defaults must be an object, got {defaults!r}")
     chosen = dict(defaults)
-    default_method = chosen.pop("method", None) or "bilinear-clustered"
+    default_method = chosen.pop("method", None) or DEFAULT_METHOD
     if not isinstance(default_method, str):
         raise InputError(f"transforms.json estimator_defaults.method must be a string, got {default_method!r}")
     known = {f.name for f in dataclasses.fields(EstimatorConfig)}
@@ -69,6 +70,7 @@ def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False,
     """
     with atomic_directory(folder, overwrite=overwrite, inputs=[dataset, *(inputs or [])], kind="run") as tmp:
         extra_arrays = {} if est.radiance_sh is None else {"radiance_sh": est.radiance_sh}
+        extra_arrays.update({f"face_{name}": value for name, value in est.face_stats.items()})
         np.savez(os.path.join(tmp, "estimate.npz"), diffuse=est.diffuse, specular=est.specular, pseudo_sh=est.pseudo_sh,
                  sh_order=est.sh_order, labels=est.labels, observed=est.observed, **extra_arrays)
         image = sh.to_latlong(est.pseudo_sh, *ILLUMINATION_MAP_SIZE)
@@ -142,8 +144,8 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
         raise RunError(f"{npz}: {pseudo_key} has {data[pseudo_key].shape[0]} coefficients, run.json's sh_order "
                        f"{config.sh_order} needs {(config.sh_order + 1) ** 2}")
     est = Estimate(data["diffuse"], data["specular"], data[pseudo_key], data["labels"], data["observed"].astype(bool),
-                   run["method"], config, {k: run[k] for k in ("timings",) if k in run},
-                   data.get("radiance_sh"))
+                   run["method"], config, {k: run[k] for k in ("timings", "trust", "warnings") if k in run},
+                   data.get("radiance_sh"), {k[5:]: v for k, v in data.items() if k.startswith("face_")})
     if est.model.light == "radiance" and est.radiance_sh is None:
         raise RunError(f"{npz}: key 'radiance_sh' missing (the {est.model.name!r} model solves for the radiance)")
     return est, run

@@ -16,6 +16,7 @@ from scipy import ndimage
 
 from estimator import sh
 from estimator.data import Estimate, TriangleMesh
+from reports.metrics import srgb_encode
 from estimator.errors import InputError
 
 from harness.io.exr import write_exr
@@ -80,9 +81,7 @@ def sample(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 def srgb8(linear: np.ndarray) -> np.ndarray:
     """Linear [0, 1] -> 8-bit sRGB (clipped)."""
-    x = np.clip(linear, 0.0, 1.0)
-    encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.round(encoded * 255.0).astype(np.uint8)
+    return np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
 
 
 def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarray | None = None,

@@ -19,6 +19,7 @@ from harness.io.dataset import write_dataset, write_ground_truth
 from harness.io.images import read_linear_rgb
 from harness.io.mesh import load_mesh_with_uv
 from harness.scene import geometry
+from harness.scene.faults import apply_faults
 from harness.scene.illumination import Illumination, build_illumination
 from harness.scene.render import build_scene, make_cameras, render_views
 from harness.scene.spec import AlbedoSpec, SceneSpec, SpecError
@@ -174,11 +175,14 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         t2 = time.perf_counter()
         meta = {"scene": spec.name, "generator": "pseudolight", "variant": backend.active_variant(),
                 "spp": spec.render.spp, "seed": spec.seed, "estimator_defaults": spec.estimator}
-        write_dataset(tmp, scene.mesh, list(zip(train_cams, train)), list(zip(test_cams, test)), meta,
-                      half=spec.render.half)
+        mesh, views, ldr = scene.mesh, list(zip(train_cams, train)), None
+        if spec.faults.active:
+            mesh, views, test_cams, ldr, meta["faults"] = apply_faults(spec.faults, spec.seed, mesh, views, test_cams)
+            say(f"faults applied to the {len(views)} training views: {spec.faults.summary()}")
+        write_dataset(tmp, mesh, views, list(zip(test_cams, test)), meta, half=spec.render.half, ldr=ldr)
         truth = scene.ground_truth()
         write_ground_truth(tmp, truth, envmap=scene.illumination.envmap,
-                           extra={"scene_spec": _spec_json(spec),
+                           extra={"scene_spec": spec_json(spec),
                                   "region_names": [r.name for r in spec.material.regions] or None})
         t3 = time.perf_counter()
     return {"path": os.path.abspath(out_dir), "scene": spec.name, "faces": scene.mesh.num_faces,
@@ -186,7 +190,7 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
                 "prepare": t1 - t0, "render": t2 - t1, "write": t3 - t2, "total": t3 - t0}}
 
 
-def _spec_json(spec: SceneSpec) -> dict:
+def spec_json(spec: SceneSpec) -> dict:
     out = dataclasses.asdict(spec)
     out.pop("profiles", None)
     return json.loads(json.dumps(out, default=str))

@@ -287,6 +287,83 @@ class RenderSpec:
 
 
 @dataclass
+class FaultSpec:
+    """Faults of real captures, applied to the training views after rendering (the test
+    views stay clean and truly posed, so novel-view scores measure the estimate). Seeded
+    (``seed``, added to the scene's) and recorded in ``transforms.json`` under ``faults``;
+    the estimator never reads that record. All zero: no fault.
+
+    Attributes
+    ----------
+    noise_read : Gaussian read-noise sigma, as a fraction of the view's 99th-percentile
+        object value (its exposure level).
+    noise_shot : shot noise; variance ``noise_shot x level x value`` (photon noise of an
+        exposure whose level collects 1 / noise_shot photons).
+    clip : exposure clipping: values above ``clip`` x level are cut (0: none).
+    ldr : frames point at 8-bit sRGB PNGs of the (clipped) image scaled so that the
+        clip level (or the level) is 255; the linear EXR stays beside it.
+    pose_rotation : degrees; each training pose turns by a random angle of this standard
+        deviation about a random axis through its centre.
+    pose_translation : each training centre moves by a random vector of this standard
+        deviation per axis, as a fraction of its distance to the object centre.
+    focal_error : relative error of the written focal length (every view: intrinsics are shared).
+    vertex_noise : vertices move along their normals by this standard deviation, as a
+        fraction of the mean edge length (the written mesh; faces keep their identity).
+    glare_views, glare_size, glare_value : that many training views get a square patch of
+        ``glare_size`` pixels where ``glare_value`` (absolute, linear) is added, centred on
+        a random object pixel.
+    occluder_views, occluder_size, occluder_value : likewise, patches replaced by the value.
+    seed : added to the scene's seed for the fault draws.
+    """
+
+    noise_read: float = 0.0
+    noise_shot: float = 0.0
+    clip: float = 0.0
+    ldr: bool = False
+    pose_rotation: float = 0.0
+    pose_translation: float = 0.0
+    focal_error: float = 0.0
+    vertex_noise: float = 0.0
+    glare_views: int = 0
+    glare_size: int = 32
+    glare_value: float = 0.5
+    occluder_views: int = 0
+    occluder_size: int = 32
+    occluder_value: float = 0.0
+    seed: int = 0
+
+    def validate(self) -> None:
+        for key in ("noise_read", "noise_shot", "clip", "pose_rotation", "pose_translation", "vertex_noise"):
+            _num(f"faults.{key}", getattr(self, key), 0)
+        _num("faults.pose_rotation", self.pose_rotation, 0, 45)
+        _num("faults.focal_error", self.focal_error, -0.5, 0.5)
+        for key in ("glare_views", "occluder_views", "seed"):
+            _num(f"faults.{key}", getattr(self, key), 0, integer=True)
+        for key in ("glare_size", "occluder_size"):
+            _num(f"faults.{key}", getattr(self, key), 1, integer=True)
+        for key in ("glare_value", "occluder_value"):
+            _num(f"faults.{key}", getattr(self, key))
+        if not isinstance(self.ldr, bool):
+            raise SpecError(f"faults.ldr must be true or false, got {self.ldr!r}")
+
+    @property
+    def active(self) -> bool:
+        """Whether any fault is set."""
+        return self.summary() != ""
+
+    def summary(self) -> str:
+        """The faults that are on, as 'key value' pairs ('' when none is)."""
+        on = {"noise_read", "noise_shot", "clip", "ldr", "pose_rotation", "pose_translation", "focal_error",
+              "vertex_noise"}
+        parts = [f"{k} {getattr(self, k)}" for k in sorted(on) if getattr(self, k)]
+        for kind in ("glare", "occluder"):
+            if getattr(self, f"{kind}_views"):
+                parts.append(f"{getattr(self, f'{kind}_views')} {kind} patch(es) of {getattr(self, f'{kind}_size')} px, "
+                             f"value {getattr(self, f'{kind}_value')}")
+        return ", ".join(parts)
+
+
+@dataclass
 class SceneSpec:
     name: str
     description: str = ""
@@ -296,6 +373,7 @@ class SceneSpec:
     illumination: IlluminationSpec = field(default_factory=IlluminationSpec)
     cameras: CameraSpec = field(default_factory=CameraSpec)
     render: RenderSpec = field(default_factory=RenderSpec)
+    faults: FaultSpec = field(default_factory=FaultSpec)
     estimator: dict = field(default_factory=dict)
     profiles: dict = field(default_factory=dict)
     path: str | None = None
@@ -429,6 +507,7 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
         illumination=IlluminationSpec(**ill),
         cameras=_build("cameras", raw.get("cameras", {}), CameraSpec),
         render=_build("render", raw.get("render", {}), RenderSpec),
+        faults=_build("faults", raw.get("faults", {}), FaultSpec),
         estimator=_estimator_defaults(raw.get("estimator", {})),
         profiles=profiles,
     )
@@ -439,6 +518,7 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
     spec.illumination.validate(base_dir)
     spec.cameras.validate()
     spec.render.validate(spec.illumination)
+    spec.faults.validate()
     return spec
 
 

@@ -415,3 +415,20 @@ def test_malformed_estimate_and_regions_arrays(copy, capsys):
         np.savez(ds / "ground_truth" / "materials.npz", **{**mats, "regions": regions})
         expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "materials.npz", "regions",
                      inputs=[run, ds], absent=[out])
+
+
+def test_holdout_views_and_trust_are_recorded_and_read_back(tmp_path, capsys):
+    from harness.io.runs import read_run
+
+    ds = tmp_path / "micro"
+    assert main(["generate", MICRO, "-o", str(ds)]) == 0
+    run = tmp_path / "r"
+    assert main(["estimate", str(ds), "-o", str(run), "--method", "bilinear-clustered", "--holdout-views", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "cross-validation: 2 views held out" in err and "trust:" in err
+    est, meta = read_run(str(run))
+    assert len(meta["cross_validation"]["views"]) == 2 and meta["cross_validation"]["psnr"] > 0
+    assert len(meta["trust"]["views"]) == 6 and "degrees_of_freedom" in meta
+    assert est.face_stats["observations"].shape == (80,) and est.face_stats["albedo_se"].shape == (80, 3)
+    expect_error(capsys, ["estimate", str(ds), "-o", str(tmp_path / "r2"), "--holdout-views", "5"],
+                 "--holdout-views must lie in [1, 4]")

@@ -1,0 +1,131 @@
+"""How far an estimate can be trusted, from its inputs alone (no ground truth).
+
+The estimate re-predicts every observation it was solved from; the residuals, relative to
+each face's median colour, give per-view residuals and outlier shares, a per-face standard
+error of the diffuse albedo, and the condition of the light's normal equations. Each
+diagnostic that makes the result doubtful becomes one warning line.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .data import Estimate
+from .pipeline import Prepared
+from .robust import relative_residuals, robust_scale
+
+OUTLIER_SIGMAS = 3.0        # a row is an outlier beyond this many robust scales
+MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-free data)
+OUTLIER_VIEW_SHARE = 0.10   # a view is an outlier when this share of its rows are ...
+OUTLIER_VIEW_FACTOR = 4.0   # ... and this many times the median view's share
+HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
+ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
+MAX_UNKEPT = 0.2            # share of faces without a kept observation
+
+
+def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) residuals of the kept observations under the estimate, and (N,) their colour
+    norms relative to the exposure level (:func:`estimator.robust.relative_residuals`)."""
+    obs = prep.obs
+    light = est.light
+    predicted = est.model.predict(est.diffuse[obs.face], est.specular[obs.face], prep.c_rows, prep.d_rows, light)
+    return obs.rgb - predicted, relative_residuals(obs.rgb, predicted)
+
+
+def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
+    """Largest condition number over channels of the light's least-squares system with the
+    albedos fixed (rows: the observations used), sqrt of the normal matrix's eigenvalue ratio."""
+    face = prep.obs.face[rows]
+    worst = 1.0
+    for k in range(3):
+        jac = est.diffuse[face, k, None] * prep.c_rows[rows] + est.specular[face, k, None] * prep.d_rows[rows]
+        eig = np.linalg.eigvalsh(jac.T @ jac)
+        if eig[-1] <= 0:
+            return float("inf")
+        worst = max(worst, float(np.sqrt(eig[-1] / max(eig[0], eig[-1] * 1e-300))))
+    return worst
+
+
+def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict, dict[str, np.ndarray]]:
+    """Trust diagnostics of an estimate.
+
+    Returns
+    -------
+    summary : JSON-ready dict: ``views`` (per view: observations, relative residual
+        (median), outlier share), ``residual`` (median relative residual, robust scale),
+        ``light_condition``, ``albedo_relative_se`` (quantiles over estimated faces),
+        ``outlier_share``.
+    faces : per-face arrays: ``observations`` (F,) kept rows, ``albedo_se`` (F, 3)
+        standard error of the diffuse albedo with the light fixed (inf where unseen).
+    """
+    obs = prep.obs
+    f = obs.num_faces
+    residual, relative = observation_residuals(prep, est)
+    estimated = est.observed[obs.face]
+    scale = robust_scale(relative[estimated]) if estimated.any() else 0.0
+    outlier = relative > OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE)
+    views = []
+    view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
+    for v in range(obs.num_views):
+        sel = (view == v) & estimated
+        views.append({"view": view_names[v] if v < len(view_names) else str(v), "observations": int(sel.sum()),
+                      "residual": float(np.median(relative[sel])) if sel.any() else None,
+                      "outlier_share": float(outlier[sel].mean()) if sel.any() else None})
+    # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
+    shade = prep.c_rows @ est.light
+    sigma = 1.4826 * np.median(np.abs(residual[estimated]), axis=0) if estimated.any() else np.zeros(3)
+    info = np.stack([np.bincount(obs.face, shade[:, k] ** 2 * ~outlier, minlength=f) for k in range(3)], 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        albedo_se = np.where(info > 0, sigma[None] / np.sqrt(info), np.inf)
+        rel_se = np.linalg.norm(albedo_se, axis=1) / np.linalg.norm(est.diffuse + est.specular, axis=1)
+    counts = np.bincount(obs.face, minlength=f)
+    good = est.observed & np.isfinite(rel_se)
+    summary = {
+        "residual": {"median_relative": float(np.median(relative[estimated])) if estimated.any() else None,
+                     "robust_scale": scale},
+        "outlier_share": float(outlier[estimated].mean()) if estimated.any() else 0.0,
+        "light_condition": _finite_or_none(light_condition(prep, est, estimated & ~outlier)
+                                           if (estimated & ~outlier).any() else float("inf")),
+        "albedo_relative_se": {q: float(np.quantile(rel_se[good], p)) for q, p in
+                               (("median", 0.5), ("p90", 0.9), ("max", 1.0))} if good.any() else None,
+        "observations_per_face": {"median": float(np.median(counts[est.observed])) if est.observed.any() else 0.0,
+                                  "min": int(counts[est.observed].min()) if est.observed.any() else 0},
+        "views": views,
+    }
+    return summary, {"observations": counts.astype(np.int64), "albedo_se": albedo_se}
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def warnings_for(est: Estimate) -> list[str]:
+    """What makes an estimate untrustworthy without ground truth, one line each."""
+    out = []
+    info = est.info
+    dof = info.get("degrees_of_freedom")
+    if dof and dof["unknowns"] >= dof["observations"]:
+        out.append(f"underdetermined: {dof['unknowns']} unknowns for {dof['observations']} observations "
+                   "(the solve fits exactly whatever the truth; add views)")
+    unkept = info.get("faces_without_kept_views", 0.0)
+    if unkept > MAX_UNKEPT:
+        out.append(f"{100 * unkept:.0f} % of the faces have no observation within min_cos_view of their normal")
+    trust = info.get("trust")
+    if not trust:
+        return out
+    cond = trust["light_condition"]
+    if cond is None or cond > ILL_CONDITIONED:
+        out.append(f"ill-conditioned: the light's normal equations have condition number "
+                   f"{'infinite' if cond is None else f'{cond:.3g}'} (parts of the light are not determined by "
+                   "the views; add views or lower sh_order)")
+    shares = [v["outlier_share"] for v in trust["views"] if v["outlier_share"] is not None]
+    typical = float(np.median(shares)) if shares else 0.0
+    bad = [v for v in trust["views"] if v["outlier_share"] is not None
+           and v["outlier_share"] > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)]
+    for v in bad:
+        out.append(f"outlier view {v['view']}: {100 * v['outlier_share']:.0f} % of its observations disagree with "
+                   f"the estimate (typical view {100 * typical:.1f} %): glare, an occluder or a wrong pose?")
+    median = trust["residual"]["median_relative"]
+    if median is not None and median > HIGH_RESIDUAL:
+        out.append(f"high residual: the estimate re-predicts its observations with a median relative error of "
+                   f"{100 * median:.0f} % (the model does not explain these images)")
+    return out

@@ -1,0 +1,72 @@
+"""Where a sweep's jobs run: in this process, in a pool of spawned worker processes, or on
+a Dask cluster. Every executor takes a top-level function and plain-dict jobs and yields
+(job, result or exception) as jobs finish, so progress shows per job."""
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Callable, Iterator
+
+from estimator.errors import InputError
+
+EXECUTORS = ("local", "dask")
+
+
+def worker_threads(workers: int, cores: int | None = None) -> int:
+    """Dr.Jit threads per worker so that ``workers`` processes share the cores without
+    oversubscription."""
+    return max(1, (cores or os.cpu_count() or 1) // max(workers, 1))
+
+
+def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "local", workers: int = 1,
+             scheduler: str | None = None) -> Iterator[tuple[dict, dict | BaseException]]:
+    """Run ``fn`` on every job; yield (job, result) or (job, exception) in completion order.
+
+    local, workers 1: in this process, in order. local, workers > 1: a process pool started
+    with ``spawn`` (Dr.Jit state must never be forked). dask: ``dask.distributed.Client``
+    connected to ``scheduler`` (``tcp://HOST:PORT``) or to a scheduler object/address a
+    caller made (e.g. a ``LocalCluster``); it needs ``pip install .[dask]``.
+    """
+    if executor not in EXECUTORS:
+        raise InputError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    if not jobs:
+        return
+    if executor == "dask":
+        yield from _dask(fn, jobs, scheduler)
+        return
+    if workers <= 1:
+        for job in jobs:
+            try:
+                yield job, fn(job)
+            except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001 - reported per job
+                if isinstance(exc, KeyboardInterrupt):
+                    raise
+                yield job, exc
+        return
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = {pool.submit(fn, job): job for job in jobs}
+        try:
+            for future in as_completed(futures):
+                exc = future.exception()
+                yield futures[future], (exc if exc is not None else future.result())
+        except KeyboardInterrupt:
+            for future in futures:
+                future.cancel()
+            raise
+
+
+def _dask(fn, jobs, scheduler):
+    try:
+        from dask.distributed import Client, as_completed as dask_completed
+    except ImportError:
+        raise InputError("--executor dask needs Dask: pip install '.[dask]'") from None
+    if scheduler is None:
+        raise InputError("--executor dask needs --scheduler tcp://HOST:PORT")
+    with Client(scheduler) as client:
+        futures = client.map(fn, jobs, pure=False)
+        index = {f.key: job for f, job in zip(futures, jobs)}
+        for future in dask_completed(futures):
+            exc = future.exception()
+            yield index[future.key], (exc if exc is not None else future.result())

@@ -1,0 +1,128 @@
+"""The jobs of a sweep: plain-dict in, plain-dict out, importable top-level functions, so
+a spawned worker or a Dask worker runs them from specs and paths (never Mitsuba objects).
+
+A job's identity is a hash of what determines its result: the resolved scene spec (a
+dataset), that dataset's identity plus the method and its parameters (a run), and the code
+version. A finished job leaves ``job.json`` holding its identity and result in its folder;
+a job whose folder holds the same identity is not run again.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+import os
+import resource
+import time
+
+JOB_FILE = "job.json"
+PACKAGES = ("estimator", "reports", "harness")
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """sha256 (16 hex digits) over the source files of the packages that shape results."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    digest = hashlib.sha256()
+    for package in PACKAGES:
+        for folder, dirs, files in sorted(os.walk(os.path.join(root, package))):
+            dirs.sort()
+            for name in sorted(files):
+                if name.endswith(".py"):
+                    path = os.path.join(folder, name)
+                    digest.update(os.path.relpath(path, root).encode())
+                    with open(path, "rb") as f:
+                        digest.update(f.read())
+    return digest.hexdigest()[:16]
+
+
+def identity(payload: dict) -> str:
+    """16 hex digits of sha256 over a JSON-able payload plus the code version."""
+    text = json.dumps({"payload": payload, "code": code_version()}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def finished(folder: str, job_id: str) -> dict | None:
+    """The recorded result when ``folder`` holds a finished job of this identity, else None."""
+    path = os.path.join(folder, JOB_FILE)
+    try:
+        with open(path) as f:
+            record = json.load(f)
+    except (OSError, ValueError):
+        return None
+    return record if record.get("id") == job_id else None
+
+
+def _record(folder: str, record: dict) -> dict:
+    tmp = os.path.join(folder, f".{JOB_FILE}.tmp-{os.getpid()}")
+    with open(tmp, "w") as f:
+        json.dump(record, f, indent=1, default=str)
+    os.replace(tmp, os.path.join(folder, JOB_FILE))
+    return record
+
+
+def _threads(job: dict) -> None:
+    from estimator import backend
+
+    backend.set_variant(job.get("variant"))
+    if job.get("threads"):
+        backend.set_thread_count(job["threads"])
+
+
+def dataset_job(job: dict) -> dict:
+    """Generate one dataset. ``job``: id, folder, spec_path, profile, overrides, force,
+    variant, threads. Returns its record (``reused`` when it was there)."""
+    if not job.get("force"):
+        done = finished(job["folder"], job["id"])
+        if done:
+            return {**done, "reused": True}
+    _threads(job)
+    from harness.scene.generate import generate
+    from harness.scene.spec import load_spec
+
+    t = time.perf_counter()
+    summary = generate(load_spec(job["spec_path"], job["profile"], job["overrides"]), job["folder"], overwrite=True,
+                       variant=job.get("variant"))
+    return _record(job["folder"], {"id": job["id"], "kind": "dataset", "seconds": time.perf_counter() - t,
+                                   "faces": summary["faces"], "views": summary["views"], "reused": False})
+
+
+def run_job(job: dict) -> dict:
+    """Estimate and report one dataset with one method. ``job``: id, folder, dataset,
+    method, params, mitsuba, force, variant, threads. Returns its record with the report's
+    headline metrics (the comparison columns)."""
+    if not job.get("force"):
+        done = finished(job["folder"], job["id"])
+        if done:
+            return {**done, "reused": True}
+    _threads(job)
+    from harness.cli.suite import run_method
+    from reports.html import lookup
+    from reports.sweep import SWEEP_METRICS
+
+    t = time.perf_counter()
+    os.makedirs(job["folder"], exist_ok=True)
+    est, metrics, _ = run_method(job["dataset"], job["method"], os.path.join(job["folder"], "run"),
+                                 os.path.join(job["folder"], "report"), job.get("mitsuba", False),
+                                 overrides=job["params"] or None, log=lambda m: None)
+    row = {key: lookup(metrics, key) for _, key in SWEEP_METRICS if key != "seconds"}
+    return _record(job["folder"], {
+        "id": job["id"], "kind": "run", "seconds": time.perf_counter() - t,
+        "estimate_seconds": float(est.info["timings"]["total"]),
+        "worker_peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "metrics": {k: (None if v is None else float(v)) for k, v in row.items()},
+        "warnings": est.info.get("warnings", []), "reused": False})
+
+
+def dataset_payload(job) -> dict:
+    """What determines a dataset: its resolved spec (a DatasetJob)."""
+    from harness.scene.generate import spec_json
+    from harness.scene.spec import load_spec
+
+    spec = load_spec(job.spec_path, job.profile, job.overrides)
+    return {"spec": spec_json(spec)}
+
+
+def describe(obj) -> dict:
+    return dataclasses.asdict(obj)

@@ -1,0 +1,90 @@
+"""Run a suite: generate each distinct dataset once, run every method on it, report each
+run, and write the comparison with one plot per sweep axis. Jobs are cached by identity
+(``harness.sweep.jobs``): an interrupted sweep resumes, a finished one does no work.
+
+Layout: OUT/datasets/SCENE-ID/, OUT/runs/SCENE-ID-LABEL/{run,report,job.json},
+OUT/compare/{compare.html,compare.json,sweep.html,sweep.json}.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+
+from tqdm import tqdm
+
+from estimator.errors import InputError
+from reports import sweep as sweep_report
+
+from harness.cli.reporting import compare_runs
+from harness.sweep.executor import run_jobs, worker_threads
+from harness.sweep.jobs import dataset_job, dataset_payload, identity, run_job
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "x"
+
+
+def plan(suite: dict, out_dir: str, mitsuba: bool = False, force: bool = False, variant: str | None = None,
+         threads: int | None = None) -> tuple[list[dict], list[dict]]:
+    """(dataset jobs, run jobs) of a suite as plain dicts with identities and folders."""
+    datasets, runs = [], []
+    for d in suite["datasets"]:
+        did = identity(dataset_payload(d))
+        folder = os.path.join(out_dir, "datasets", f"{_slug(d.scene)}-{did}")
+        datasets.append({"id": did, "folder": folder, "scene": d.scene, "spec_path": d.spec_path,
+                         "profile": d.profile, "overrides": d.overrides, "axes": d.axes, "seed": d.seed,
+                         "force": force, "variant": variant, "threads": threads})
+        for m in suite["methods"]:
+            rid = identity({"dataset": did, "method": m.method, "params": m.params, "mitsuba": mitsuba})
+            runs.append({"id": rid, "folder": os.path.join(out_dir, "runs", f"{_slug(d.scene)}-{did}-{_slug(m.label)}"),
+                         "dataset": folder, "scene": d.scene, "axes": d.axes, "seed": d.seed, "label": m.label,
+                         "method": m.method, "params": m.params, "mitsuba": mitsuba, "force": force,
+                         "variant": variant, "threads": threads})
+    unique = {j["id"]: j for j in datasets}   # two sweep points may resolve to one spec
+    return list(unique.values()), runs
+
+
+def _execute(fn, jobs, what, executor, workers, scheduler, log) -> dict[str, dict]:
+    results, failed = {}, []
+    with tqdm(total=len(jobs), desc=what, unit="job", disable=None) as bar:
+        for job, result in run_jobs(fn, jobs, executor, workers, scheduler):
+            bar.update(1)
+            name = os.path.basename(job["folder"])
+            if isinstance(result, BaseException):
+                failed.append(name)
+                log(f"{what} {name}: FAILED: {type(result).__name__}: {result}")
+                continue
+            results[job["id"]] = result
+            state = "reused" if result.get("reused") else f"done in {result['seconds']:.1f} s"
+            log(f"{what} {name}: {state}")
+    if failed:
+        raise InputError(f"{len(failed)} {what} job(s) failed: {', '.join(failed[:5])}; finished jobs are kept, "
+                         "run the suite again to resume")
+    return results
+
+
+def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int = 1, scheduler: str | None = None,
+              force: bool = False, mitsuba: bool = False, variant: str | None = None, log=print) -> dict:
+    """Run a loaded suite (:func:`harness.sweep.suite.load_suite`) into ``out_dir``.
+
+    Returns a summary: job counts (run and reused), seconds, the rows of sweep.json.
+    """
+    t0 = time.perf_counter()
+    threads = worker_threads(workers) if executor == "local" and workers > 1 else None
+    datasets, runs = plan(suite, out_dir, mitsuba, force, variant, threads)
+    done_d = _execute(dataset_job, datasets, "dataset", executor, workers, scheduler, log)
+    done_r = _execute(run_job, runs, "run", executor, workers, scheduler, log)
+    rows = [{"scene": r["scene"], "label": r["label"], "method": r["method"], "axes": r["axes"], "seed": r["seed"],
+             "run": r["folder"], "seconds": done_r[r["id"]]["estimate_seconds"],
+             **done_r[r["id"]]["metrics"]} for r in runs]
+    compare_dir = os.path.join(out_dir, "compare")
+    compare_runs([os.path.join(r["folder"], "report") for r in runs], compare_dir, overwrite=True)
+    sweep_report.write(compare_dir, suite["name"], rows)
+    reused = sum(1 for r in list(done_d.values()) + list(done_r.values()) if r.get("reused"))
+    summary = {"datasets": len(datasets), "runs": len(runs), "reused": reused,
+               "executed": len(datasets) + len(runs) - reused, "seconds": time.perf_counter() - t0, "rows": rows}
+    with open(os.path.join(out_dir, "sweep-summary.json"), "w") as f:
+        json.dump({k: v for k, v in summary.items() if k != "rows"}, f, indent=1)
+    return summary

@@ -1,0 +1,71 @@
+"""Trust without ground truth: per-view residuals and outlier shares, per-face standard
+errors, conditioning, warnings, and leave-views-out cross-validation."""
+import json
+
+import numpy as np
+import pytest
+
+from estimator.config import EstimatorConfig
+from estimator.data import MultiViewData
+from estimator.errors import InputError
+from estimator.methods import estimate
+from estimator.validation import cross_validate, holdout_indices
+from harness.io.dataset import read_dataset
+from harness.scene.generate import generate
+from harness.scene.spec import load_spec, resolve_scene
+
+
+@pytest.fixture(scope="module")
+def glare_sparse(tmp_path_factory):
+    """tiny sparse-colored with one training view under a 40 px glare patch of +1.0."""
+    out = str(tmp_path_factory.mktemp("glare") / "sparse")
+    generate(load_spec(resolve_scene("sparse-colored"), "tiny", {"faults.glare_views": 1, "faults.glare_size": 40,
+                                                                   "faults.glare_value": 1.0}), out)
+    return out
+
+
+def test_clean_estimate_reports_trust_and_does_not_warn(tiny_sparse_data):
+    est = estimate(tiny_sparse_data.data, "bilinear-clustered", EstimatorConfig())
+    trust = est.info["trust"]
+    assert len(trust["views"]) == len(tiny_sparse_data.data.views)
+    assert trust["residual"]["median_relative"] < 0.05 and 1 <= trust["light_condition"] < 1e7
+    assert est.info["warnings"] == []
+    counts, se = est.face_stats["observations"], est.face_stats["albedo_se"]
+    assert counts.shape == (tiny_sparse_data.data.mesh.num_faces,) and se.shape == (len(counts), 3)
+    assert np.all(counts[est.observed] >= 1)
+    assert np.mean(np.isfinite(se[counts > 0]).all(axis=1)) > 0.95   # inf: every row of the face an outlier
+    # a face seen more often is known better (same shading level): standard error falls with the count
+    many, few = counts >= np.percentile(counts[counts > 0], 75), (counts > 0) & (counts <= 2)
+    if few.any():
+        assert np.median(se[many].mean(axis=1)) < np.median(se[few].mean(axis=1))
+
+
+def test_a_glare_view_is_flagged(glare_sparse):
+    ds = read_dataset(glare_sparse)
+    glare_view = json.load(open(f"{glare_sparse}/transforms.json"))["faults"]["patches"][0]["view"]
+    est = estimate(ds.data, "bilinear-clustered", EstimatorConfig())
+    shares = [v["outlier_share"] or 0.0 for v in est.info["trust"]["views"]]
+    assert int(np.argmax(shares)) == glare_view
+    name = ds.data.views[glare_view].name
+    assert any(line.startswith(f"outlier view {name}") for line in est.info["warnings"])
+
+
+def test_holdout_indices_spread_and_refuse_bad_counts():
+    np.testing.assert_array_equal(holdout_indices(10, 2), [3, 6])
+    assert len(holdout_indices(24, 4)) == 4
+    for k in (0, 9):
+        with pytest.raises(InputError, match="holdout-views"):
+            holdout_indices(10, k)
+
+
+def test_cross_validation_drops_when_a_fault_is_injected(tiny_sparse_data):
+    def solve(data):
+        return estimate(data, "bilinear-clustered", EstimatorConfig())
+
+    clean = cross_validate(tiny_sparse_data.data, 3, solve)
+    assert len(clean["views"]) == 3 and clean["psnr"] > 18   # tiny: 1 spp, grazing views extrapolated
+    rng = np.random.default_rng(0)
+    noisy_views = [type(v)(v.name, v.camera, v.rgb + 0.2 * rng.standard_normal(v.rgb.shape).astype(np.float32),
+                           v.alpha) for v in tiny_sparse_data.data.views]
+    noisy = cross_validate(MultiViewData(tiny_sparse_data.data.mesh, noisy_views), 3, solve)
+    assert noisy["psnr"] < clean["psnr"] - 3

@@ -1,0 +1,114 @@
+"""Benchmark sweeps: suite expansion, job identity, resume without repeated work, and the
+same sweep on a spawned pool and on a loopback Dask LocalCluster."""
+import json
+import os
+
+import pytest
+
+from harness.cli.main import main
+from harness.scene.spec import SpecError
+from harness.sweep import jobs
+from harness.sweep.executor import run_jobs, worker_threads
+from harness.sweep.runner import plan
+from harness.sweep.suite import load_suite
+
+
+def _suite_file(tmp_path, text):
+    path = tmp_path / "suite.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_suite_expands_axes_seeds_and_methods(tmp_path):
+    path = _suite_file(tmp_path, """
+name = "t"
+profile = "tiny"
+seeds = [0, 1]
+methods = ["median-color", { method = "bilinear-clustered", label = "o4", params = { sh_order = 4 } }]
+[[scenes]]
+scene = "sparse-colored"
+sweep = { "cameras.count" = [6, 12], "faults.noise_read" = [0.0, 0.1] }
+""")
+    suite = load_suite(path)
+    assert len(suite["datasets"]) == 2 * 2 * 2 and [m.label for m in suite["methods"]] == ["median-color", "o4"]
+    datasets, runs = plan(suite, str(tmp_path / "out"))
+    assert len({d["id"] for d in datasets}) == 8 and len(runs) == 16
+    assert len({r["id"] for r in runs}) == 16
+    again, _ = plan(load_suite(path), str(tmp_path / "out"))
+    assert [d["id"] for d in again] == [d["id"] for d in datasets]      # identity is deterministic
+
+
+@pytest.mark.parametrize("text, needle", [
+    ('methods = ["nope"]\nscenes = ["sparse-colored"]', "not a registered method"),
+    ('methods = ["median-color"]\nscenes = ["sparse-colored"]\ncolour = 1', "unknown suite key"),
+    ('methods = ["median-color"]\n[[scenes]]\nscene = "sparse-colored"\nsweep = { "cameras.count" = [] }',
+     "non-empty lists"),
+    ('methods = ["median-color"]\n[[scenes]]\nscene = "sparse-colored"\nsweep = { "cameras.count" = [0] }',
+     "cameras.count"),
+    ('methods = [{ method = "median-color", params = { sh_order = -1 } }]\nscenes = ["sparse-colored"]', "sh_order"),
+    ('methods = ["median-color", "median-color"]\nscenes = ["sparse-colored"]', "labels must be distinct"),
+])
+def test_bad_suites_name_the_problem(tmp_path, text, needle):
+    with pytest.raises(SpecError, match=needle):
+        load_suite(_suite_file(tmp_path, text))
+
+
+def test_identity_changes_with_the_code_version(monkeypatch):
+    a = jobs.identity({"x": 1})
+    monkeypatch.setattr(jobs, "code_version", lambda: "other")
+    assert jobs.identity({"x": 1}) != a
+
+
+def test_worker_threads_split_the_cores():
+    assert worker_threads(2, cores=2) == 1 and worker_threads(1, cores=8) == 8 and worker_threads(16, cores=2) == 1
+
+
+def _square(job):
+    if job["x"] < 0:
+        raise ValueError("negative")
+    return {"y": job["x"] ** 2}
+
+
+def test_pool_runs_jobs_and_reports_failures_per_job():
+    results = dict((j["x"], r) for j, r in run_jobs(_square, [{"x": 2}, {"x": -1}, {"x": 3}], "local", 2))
+    assert results[2] == {"y": 4} and results[3] == {"y": 9} and isinstance(results[-1], ValueError)
+
+
+def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
+    out = tmp_path / "smoke"
+    assert main(["suite", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
+    first = capsys.readouterr().out
+    assert "2 datasets, 4 runs: 6 jobs run, 0 reused" in first
+    rows = json.load(open(out / "compare" / "sweep.json"))["rows"]
+    assert {r["label"] for r in rows} == {"bilinear-clustered", "median-color"}
+    assert {r["axes"]["cameras.count"] for r in rows} == {6, 12}
+    html = (out / "compare" / "sweep.html").read_text()
+    assert html.count("<img") == 1 and "cameras.count" in html
+    assert (out / "compare" / "compare.html").is_file()
+    # resumed: nothing is run again; the runs' files are untouched
+    run_json = next((out / "runs").glob("*/run/run.json"))
+    stamp = os.path.getmtime(run_json)
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
+    assert "0 jobs run, 6 reused" in capsys.readouterr().out and os.path.getmtime(run_json) == stamp
+    # an interrupted sweep: one run lost its record; only that job runs again
+    os.remove(run_json.parent.parent / jobs.JOB_FILE)
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
+    assert "1 jobs run, 5 reused" in capsys.readouterr().out
+
+
+def test_smoke_sweep_on_a_spawned_pool_and_on_dask(tmp_path, capsys):
+    distributed = pytest.importorskip("dask.distributed")
+    pool = tmp_path / "pool"
+    assert main(["bench", "smoke", "-o", str(pool), "--no-mitsuba", "--jobs", "2"]) == 0
+    assert "6 jobs run" in capsys.readouterr().out
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        out = tmp_path / "dask"
+        assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--executor", "dask",
+                     "--scheduler", cluster.scheduler_address]) == 0
+    assert "6 jobs run" in capsys.readouterr().out
+    a = json.load(open(pool / "compare" / "sweep.json"))["rows"]
+    b = json.load(open(out / "compare" / "sweep.json"))["rows"]
+    key = "albedo.diffuse.lstsq.luminance.within_10"
+    assert sorted((r["label"], r["axes"]["cameras.count"], r[key]) for r in a) == \
+        sorted((r["label"], r["axes"]["cameras.count"], r[key]) for r in b)
