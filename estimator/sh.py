@@ -191,8 +191,9 @@ def phong_filter(order: int, exponent: float) -> np.ndarray:
     a = 1.0 + 0.5 * (n - l)
     log_common = 0.5 * np.log(np.pi) - (n + 1) * np.log(2.0) + special.gammaln(n + 1) - special.gammaln(0.5 * (n + l + 3))
     positive = a > 0
-    value = np.where(positive, np.exp(log_common - special.gammaln(np.where(positive, a, 1.0))),
-                     np.exp(log_common) * special.rgamma(a))
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # both branches are evaluated
+        value = np.where(positive, np.exp(log_common - special.gammaln(np.where(positive, a, 1.0))),
+                         np.exp(log_common) * special.rgamma(a))
     return (n + 1.0) * value
 
 

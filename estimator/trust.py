@@ -15,8 +15,9 @@ from .robust import relative_residuals, robust_scale
 
 OUTLIER_SIGMAS = 3.0        # a row is an outlier beyond this many robust scales
 MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-free data)
-OUTLIER_VIEW_SHARE = 0.10   # a view is an outlier when this share of its rows are ...
-OUTLIER_VIEW_FACTOR = 4.0   # ... and this many times the median view's share
+GROSS_RESIDUAL = 0.2        # a gross error: residual above 20 % of the exposure level
+OUTLIER_VIEW_SHARE = 0.05   # a view is an outlier when this share of its rows are gross errors ...
+OUTLIER_VIEW_FACTOR = 5.0   # ... and this many times the median view's share
 HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
 ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
 MAX_UNKEPT = 0.2            # share of faces without a kept observation
@@ -51,7 +52,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     Returns
     -------
     summary : JSON-ready dict: ``views`` (per view: observations, relative residual
-        (median), outlier share), ``residual`` (median relative residual, robust scale),
+        (median), outlier share, gross-error share), ``residual`` (median relative residual, robust scale),
         ``light_condition``, ``albedo_relative_se`` (quantiles over estimated faces),
         ``outlier_share``.
     faces : per-face arrays: ``observations`` (F,) kept rows, ``albedo_se`` (F, 3)
@@ -69,7 +70,8 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
         sel = (view == v) & estimated
         views.append({"view": view_names[v] if v < len(view_names) else str(v), "observations": int(sel.sum()),
                       "residual": float(np.median(relative[sel])) if sel.any() else None,
-                      "outlier_share": float(outlier[sel].mean()) if sel.any() else None})
+                      "outlier_share": float(outlier[sel].mean()) if sel.any() else None,
+                      "gross_share": float(np.mean(relative[sel] > GROSS_RESIDUAL)) if sel.any() else None})
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     shade = prep.c_rows @ est.light
     sigma = 1.4826 * np.median(np.abs(residual[estimated]), axis=0) if estimated.any() else np.zeros(3)
@@ -117,13 +119,14 @@ def warnings_for(est: Estimate) -> list[str]:
         out.append(f"ill-conditioned: the light's normal equations have condition number "
                    f"{'infinite' if cond is None else f'{cond:.3g}'} (parts of the light are not determined by "
                    "the views; add views or lower sh_order)")
-    shares = [v["outlier_share"] for v in trust["views"] if v["outlier_share"] is not None]
+    shares = [v["gross_share"] for v in trust["views"] if v.get("gross_share") is not None]
     typical = float(np.median(shares)) if shares else 0.0
-    bad = [v for v in trust["views"] if v["outlier_share"] is not None
-           and v["outlier_share"] > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)]
+    bad = [v for v in trust["views"] if v.get("gross_share") is not None
+           and v["gross_share"] > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)]
     for v in bad:
-        out.append(f"outlier view {v['view']}: {100 * v['outlier_share']:.0f} % of its observations disagree with "
-                   f"the estimate (typical view {100 * typical:.1f} %): glare, an occluder or a wrong pose?")
+        out.append(f"outlier view {v['view']}: {100 * v['gross_share']:.1f} % of its observations are off by over "
+                   f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level (typical view {100 * typical:.1f} %): glare, "
+                   "an occluder or a wrong pose?")
     median = trust["residual"]["median_relative"]
     if median is not None and median > HIGH_RESIDUAL:
         out.append(f"high residual: the estimate re-predicts its observations with a median relative error of "

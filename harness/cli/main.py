@@ -377,6 +377,48 @@ def cmd_export_texture(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    from harness.io.atomic import atomic_directory
+    from harness.io.dataset import read_dataset
+    from harness.io.nerf_synthetic import write_nerf_synthetic
+
+    check_output(args.output, [args.dataset], args.overwrite)
+    ds = read_dataset(args.dataset, load_test=True, load_truth=True)
+    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.dataset, *ds.inputs], kind="export") as tmp:
+        summary = write_nerf_synthetic(ds, tmp, args.size)
+    print(f"nerf-synthetic: {summary['train']} train + {summary['test']} test frames (exposure "
+          f"{summary['exposure']:.4g}){', ground truth textures' if 'ground_truth' in summary else ''} written to "
+          f"{os.path.abspath(args.output)}")
+    return 0
+
+
+def cmd_import(args) -> int:
+    from harness.io.dataset import fingerprint, read_dataset
+    from harness.io.imports import imported_estimate, read_per_face, read_uv_textures
+    from harness.io.runs import write_run
+
+    files = [p for p in (args.file, args.mesh, args.diffuse, args.specular, args.envmap) if p]
+    check_output(args.output, [args.dataset, *files], args.overwrite)
+    ds = read_dataset(args.dataset, load_test=False, load_truth=False)
+    f = ds.data.mesh.num_faces
+    if args.source == "per-face":
+        if not args.file:
+            raise InputError("--from per-face needs --file RESULTS.npz|.csv")
+        arrays = read_per_face(args.file, f)
+    else:
+        if not (args.mesh and args.diffuse):
+            raise InputError("--from uv-textures needs --mesh MESH_WITH_UVS and --diffuse TEXTURE "
+                             "(--specular, --envmap optional)")
+        arrays = read_uv_textures(ds.data.mesh, args.mesh, args.diffuse, args.specular, args.envmap)
+    est = imported_estimate(arrays, f, f"{args.source}: {', '.join(os.path.abspath(p) for p in files)}",
+                            _positive_float("--exponent", args.exponent))
+    write_run(args.output, est, args.dataset, overwrite=args.overwrite, extra={"scene": ds.meta.get("scene")},
+              fingerprint=fingerprint(ds.data), inputs=[*ds.inputs, *files])
+    print(f"imported {args.source} for {f} faces as {est.method}; written to {os.path.abspath(args.output)} "
+          "(score it with pseudolight report)")
+    return 0
+
+
 def _int_at_least(minimum: int):
     """An argparse type: an integer >= ``minimum`` (a one-line error otherwise)."""
     def parse(text: str) -> int:
@@ -510,6 +552,28 @@ def build_parser() -> argparse.ArgumentParser:
     tx.add_argument("--size", type=_int_at_least(16), default=1024, help="texture width and height (default 1024)")
     tx.add_argument("--overwrite", action="store_true")
     tx.set_defaults(func=cmd_export_texture)
+
+    ex = sub.add_parser("export", help="a dataset in another tool's layout (nerf-synthetic)")
+    ex.add_argument("dataset")
+    ex.add_argument("--format", choices=("nerf-synthetic",), default="nerf-synthetic")
+    ex.add_argument("-o", "--output", required=True, help="folder to create")
+    ex.add_argument("--size", type=_int_at_least(16), default=1024, help="ground-truth texture size")
+    ex.add_argument("--overwrite", action="store_true")
+    ex.set_defaults(func=cmd_export)
+
+    im = sub.add_parser("import", help="another method's result (per-face arrays or UV textures) as a run")
+    im.add_argument("dataset")
+    im.add_argument("--from", dest="source", choices=("per-face", "uv-textures"), required=True)
+    im.add_argument("--file", help="per-face .npz (diffuse, specular, radiance_sh|pseudo_sh) or .csv")
+    im.add_argument("--mesh", help="mesh file with texture coordinates (OBJ/PLY/glTF)")
+    im.add_argument("--diffuse", help="diffuse texture (PNG/JPEG sRGB, EXR/HDR linear)")
+    im.add_argument("--specular", help="specular texture")
+    im.add_argument("--envmap", help="lat-long environment map (radiance, Mitsuba orientation)")
+    im.add_argument("--exponent", default="10000",
+                    help="Phong exponent filtering the envmap into the pseudo illumination (default 10000: a mirror)")
+    im.add_argument("-o", "--output", required=True, help="run folder to create")
+    im.add_argument("--overwrite", action="store_true")
+    im.set_defaults(func=cmd_import)
 
     d = sub.add_parser("demo", help="the main job on the default scene (earth-specular)")
     d.add_argument("-o", "--output", default="out")

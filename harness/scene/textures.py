@@ -56,6 +56,12 @@ def uv_texture_average(mesh: TriangleMesh, uv: np.ndarray, texture: np.ndarray,
     """
     bary = _barycentric_grid(samples_per_edge)
     coords = np.einsum("sk,fkd->fsd", bary, uv[mesh.faces]).reshape(-1, 2)
+    return sample_uv(texture, coords).reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
+
+
+def sample_uv(texture: np.ndarray, coords: np.ndarray) -> np.ndarray:
+    """(N, C) bilinear lookup of ``texture`` (H, W, C) at texture coordinates (N, 2): u left
+    to right, v bottom to top (OBJ/PLY convention), wrapping; pixel centres at half-texels."""
     h, w = texture.shape[:2]
     x = np.mod(coords[:, 0], 1.0) * w - 0.5
     y = (1.0 - np.mod(coords[:, 1], 1.0)) * h - 0.5
@@ -64,8 +70,7 @@ def uv_texture_average(mesh: TriangleMesh, uv: np.ndarray, texture: np.ndarray,
     x0, x1 = x0 % w, (x0 + 1) % w
     y0, y1 = np.clip(y0, 0, h - 1), np.clip(y0 + 1, 0, h - 1)
     t = np.asarray(texture, dtype=np.float64)
-    values = ((1 - fy) * ((1 - fx) * t[y0, x0] + fx * t[y0, x1]) + fy * ((1 - fx) * t[y1, x0] + fx * t[y1, x1]))
-    return values.reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
+    return (1 - fy) * ((1 - fx) * t[y0, x0] + fx * t[y0, x1]) + fy * ((1 - fx) * t[y1, x0] + fx * t[y1, x1])
 
 
 def region_labels(mesh: TriangleMesh, rules: list[tuple[np.ndarray, list[tuple[float, float]]]]) -> np.ndarray:
