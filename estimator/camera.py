@@ -150,3 +150,24 @@ class Camera:
             x = self.fx * p[:, 0] / depth + self.cx
             y = -self.fy * p[:, 1] / depth + self.cy
         return np.stack([x, y], axis=1), depth
+
+
+def mitsuba_sensor(mi, camera: "Camera", spp: int) -> dict:
+    """The Mitsuba ``perspective`` sensor dict of ``camera`` (square pixels), with an RGBA
+    ``hdrfilm`` (box filter) and a ``multijitter`` sampler of ``spp`` samples; ``mi`` is the
+    mitsuba module with a variant set."""
+    if abs(camera.fx - camera.fy) > 1e-6 * camera.fx:
+        raise InputError("rendering needs square pixels (fl_x == fl_y)")
+    return {
+        "type": "perspective",
+        "fov_axis": "x",
+        "fov": camera.fov_x_deg,
+        "principal_point_offset_x": (0.5 * camera.width - camera.cx) / camera.width,
+        "principal_point_offset_y": (0.5 * camera.height - camera.cy) / camera.height,
+        "near_clip": 1e-3,
+        "far_clip": 1e5,
+        "to_world": mi.ScalarTransform4f(gl_to_mitsuba(camera.c2w)),
+        "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
+                 "pixel_format": "rgba", "rfilter": {"type": "box"}},
+        "sampler": {"type": "multijitter", "sample_count": int(spp)},
+    }

@@ -80,6 +80,10 @@ class EstimatorConfig:
     segment_min_shading : ``bilinear-segmented`` segments faces whose diffuse shading is at
         least this fraction of the ``recluster_shading_percentile`` level (a low quantile
         of the colour over views divided by the shading is clean down to a few percent).
+    ad_time_budget, ad_resolution, ad_spp, ad_learning_rate, ad_envmap_height : the
+        ``mitsuba-ad`` peer: wall-clock seconds of Adam steps, the rendered width it aims at
+        (the views are box-averaged by an integer factor), samples per pixel, Adam's
+        learning rate, and the final envmap height (it starts at half, doubling halfway).
     variant : Mitsuba variant for the ray queries (None: auto).
     """
 
@@ -118,6 +122,11 @@ class EstimatorConfig:
     robust_loss: str = "auto"
     robust_rounds: int = 2
     glint_ratio: float = 4.0
+    ad_time_budget: float = 60.0
+    ad_resolution: int = 64
+    ad_spp: int = 4
+    ad_learning_rate: float = 0.02
+    ad_envmap_height: int = 16
     variant: str | None = None
 
     def __post_init__(self):
@@ -146,6 +155,10 @@ class EstimatorConfig:
             (self.glint_ratio > 1, "glint_ratio must be > 1"),
             (self.relabel_rounds >= 0, "relabel_rounds must be >= 0"),
             (self.relabel_free_ratio >= 1, "relabel_free_ratio must be >= 1"),
+            (self.ad_time_budget > 0, "ad_time_budget must be > 0"),
+            (self.ad_resolution >= 8 and self.ad_spp >= 1 and self.ad_envmap_height >= 4,
+             "ad_resolution must be >= 8, ad_spp >= 1 and ad_envmap_height >= 4"),
+            (self.ad_learning_rate > 0, "ad_learning_rate must be > 0"),
             (0 <= self.segment_min_shading < 1, "segment_min_shading must lie in [0, 1)"),
             (self.segment_threshold > 0 and self.uniform_spread > 0,
              "segment_threshold and uniform_spread must be > 0"),

@@ -536,7 +536,8 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
     rejected = prep.all_obs.rejected
     est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
-    est.info["trust"], est.face_stats = trust.diagnose(prep, est, [v.name for v in data.views])
+    est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
+    est.face_stats = {**est.face_stats, **stats}
     est.info["warnings"] = trust.warnings_for(est)
     return est
 
@@ -556,3 +557,6 @@ def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates
         est.info["exponent_selection"] = {str(n): e.info["residuals"][-1] for n, e in tried.items()}
         return est
     return cls(config, known_sh, known_radiance).solve(prep)
+
+
+from . import peer  # noqa: E402,F401  (registers 'mitsuba-ad'; it subclasses Method)

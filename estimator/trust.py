@@ -17,7 +17,8 @@ OUTLIER_SIGMAS = 3.0        # a row is an outlier beyond this many robust scales
 MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-free data)
 GROSS_RESIDUAL = 0.2        # a gross error: residual above 20 % of the exposure level
 OUTLIER_VIEW_SHARE = 0.05   # a view is an outlier when this share of its rows are gross errors ...
-OUTLIER_VIEW_FACTOR = 5.0   # ... and this many times the median view's share
+OUTLIER_VIEW_FACTOR = 5.0   # ... and this many times the median view's share ...
+OUTLIER_VIEW_ROWS = 10      # ... and at least this many rows (a few faces of a small view are chance)
 HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
 ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
 MAX_UNKEPT = 0.2            # share of faces without a kept observation
@@ -122,7 +123,8 @@ def warnings_for(est: Estimate) -> list[str]:
     shares = [v["gross_share"] for v in trust["views"] if v.get("gross_share") is not None]
     typical = float(np.median(shares)) if shares else 0.0
     bad = [v for v in trust["views"] if v.get("gross_share") is not None
-           and v["gross_share"] > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)]
+           and v["gross_share"] > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)
+           and v["gross_share"] * v["observations"] >= OUTLIER_VIEW_ROWS]
     for v in bad:
         out.append(f"outlier view {v['view']}: {100 * v['gross_share']:.1f} % of its observations are off by over "
                    f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level (typical view {100 * typical:.1f} %): glare, "

@@ -248,7 +248,8 @@ def cmd_demo(args) -> int:
 
 
 CONFIG_FLAGS = ("components", "sh_order", "directions", "iterations", "min_cos_view", "diffuse_light",
-                "defilter_order", "phong_exponent", "specular_model", "variant")  # flags named as EstimatorConfig fields
+                "defilter_order", "phong_exponent", "specular_model", "variant", "robust_loss",
+                "ad_time_budget")  # flags named as EstimatorConfig fields
 
 
 def _config_flags(args) -> dict:
@@ -436,11 +437,15 @@ _positive_int, _count = _int_at_least(1), _int_at_least(0)
 
 
 def _add_estimator_flags(p) -> None:
-    from estimator.config import COMPONENTS, DIFFUSE_LIGHTS, SPECULAR_MODELS
+    from estimator.config import COMPONENTS, DIFFUSE_LIGHTS, LOSSES, SPECULAR_MODELS
 
     p.add_argument("--method", help="registered method (default: the dataset's recommendation, "
                                     "else bilinear-segmented)")
     p.add_argument("--components", choices=COMPONENTS)
+    p.add_argument("--robust-loss", dest="robust_loss", choices=LOSSES,
+                   help="M-estimator of the solve (default auto: the method's own)")
+    p.add_argument("--time-budget", dest="ad_time_budget", type=float, metavar="SECONDS",
+                   help="mitsuba-ad: wall-clock seconds of optimisation (default 60)")
     p.add_argument("--sh-order", type=int)
     p.add_argument("--directions", type=int, help="sample directions of the shadow function (paper: 1164)")
     p.add_argument("--iterations", type=int)

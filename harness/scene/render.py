@@ -5,7 +5,7 @@ import numpy as np
 from tqdm import tqdm
 
 from estimator import backend
-from estimator.camera import Camera, gl_to_mitsuba, look_at
+from estimator.camera import Camera, gl_to_mitsuba, look_at, mitsuba_sensor
 from estimator.data import TriangleMesh
 from estimator.raycast import mitsuba_mesh
 from estimator.sh import axis_angle_matrix, fibonacci_sphere
@@ -148,28 +148,10 @@ def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, m
         "embree_use_robust_intersections": True,
         "integrator": integ,
         "object": m,
-        "sensor": _sensor_dict(mi, camera, spp),
+        "sensor": mitsuba_sensor(mi, camera, spp),
     }
     scene.update(illumination.mitsuba_emitters(mi))
     return mi.load_dict(scene)
-
-
-def _sensor_dict(mi, camera: Camera, spp: int) -> dict:
-    if abs(camera.fx - camera.fy) > 1e-6 * camera.fx:
-        raise ValueError("rendering needs square pixels (fl_x == fl_y)")
-    return {
-        "type": "perspective",
-        "fov_axis": "x",
-        "fov": camera.fov_x_deg,
-        "principal_point_offset_x": (0.5 * camera.width - camera.cx) / camera.width,
-        "principal_point_offset_y": (0.5 * camera.height - camera.cy) / camera.height,
-        "near_clip": 1e-3,
-        "far_clip": 1e5,
-        "to_world": mi.ScalarTransform4f(gl_to_mitsuba(camera.c2w)),
-        "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
-                 "pixel_format": "rgba", "rfilter": {"type": "box"}},
-        "sampler": {"type": "multijitter", "sample_count": int(spp)},
-    }
 
 
 def render_views(scene, cameras: list[Camera], spp: int, seed: int = 0, desc: str = "render") -> list[np.ndarray]:

@@ -11,6 +11,7 @@ from typing import Callable, Iterator
 from estimator.errors import InputError
 
 EXECUTORS = ("local", "dask")
+BLAS_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def worker_threads(workers: int, cores: int | None = None) -> int:
@@ -45,16 +46,28 @@ def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "loca
                 yield job, exc
         return
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {pool.submit(fn, job): job for job in jobs}
-        try:
-            for future in as_completed(futures):
-                exc = future.exception()
-                yield futures[future], (exc if exc is not None else future.result())
-        except KeyboardInterrupt:
-            for future in futures:
-                future.cancel()
-            raise
+    # spawned workers inherit the environment (they start on the first submit): one BLAS/OpenMP
+    # pool each, of their share of the cores
+    share = str(worker_threads(workers))
+    saved = {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}
+    os.environ.update({k: share for k in BLAS_THREAD_VARIABLES})
+    try:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            futures = {pool.submit(fn, job): job for job in jobs}
+            try:
+                for future in as_completed(futures):
+                    exc = future.exception()
+                    yield futures[future], (exc if exc is not None else future.result())
+            except KeyboardInterrupt:
+                for future in futures:
+                    future.cancel()
+                raise
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _dask(fn, jobs, scheduler):

@@ -84,3 +84,35 @@ def test_cross_validation_drops_when_a_fault_is_injected(tiny_sparse_data):
                            v.alpha) for v in tiny_sparse_data.data.views]
     noisy = cross_validate(MultiViewData(tiny_sparse_data.data.mesh, noisy_views), 3, solve)
     assert noisy["psnr"] < clean["psnr"] - 3
+
+
+def _with_trust(trust, **info):
+    from estimator.data import Estimate
+
+    f = 4
+    pseudo = np.zeros((9, 3))
+    pseudo[0] = 1.0
+    return Estimate(np.ones((f, 3)), np.zeros((f, 3)), pseudo, np.zeros(f, int), np.ones(f, bool), "x",
+                    EstimatorConfig(sh_order=2), {"trust": trust, **info})
+
+
+def _trust(median=0.01, condition=10.0, shares=(0.0, 0.0, 0.0, 0.0)):
+    return {"residual": {"median_relative": median, "robust_scale": median}, "light_condition": condition,
+            "views": [{"view": f"v{i}", "observations": 100, "outlier_share": s, "gross_share": s}
+                      for i, s in enumerate(shares)]}
+
+
+@pytest.mark.parametrize("trust, info, needle", [
+    (_trust(median=0.3), {}, "high residual"),
+    (_trust(condition=1e9), {}, "ill-conditioned"),
+    (_trust(condition=None), {}, "condition number infinite"),
+    (_trust(shares=(0.0, 0.3, 0.0, 0.0)), {}, "outlier view v1"),
+    (_trust(), {"faces_without_kept_views": 0.5}, "50 % of the faces have no observation"),
+    (_trust(), {"degrees_of_freedom": {"observations": 10, "unknowns": 12}}, "underdetermined"),
+])
+def test_each_warning_fires_on_its_condition(trust, info, needle):
+    from estimator.trust import warnings_for
+
+    lines = warnings_for(_with_trust(trust, **info))
+    assert len(lines) == 1 and needle in lines[0]
+    assert warnings_for(_with_trust(_trust())) == []
