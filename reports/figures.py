@@ -158,3 +158,34 @@ def sweep_panels(axis: str, panels: list[tuple[str, dict]]) -> bytes:
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     return _png(fig)
+
+
+def face_values(caster: RayCaster, values: np.ndarray, title: str, log: bool = True) -> bytes:
+    """One per-face scalar (F,) as a lat-long map of the mesh (NaN/inf and unseen: grey)."""
+    ids = face_latlong(caster)
+    v = np.asarray(values, float)
+    shown = np.where(ids >= 0, v[np.maximum(ids, 0)], np.nan)
+    shown[~np.isfinite(shown)] = np.nan
+    if log:
+        shown = np.log10(np.maximum(shown, 1e-6))
+    fig, ax = plt.subplots(figsize=(8, 4))
+    cmap = plt.get_cmap("viridis").with_extremes(bad=(0.5, 0.5, 0.5))
+    im = ax.imshow(np.ma.masked_invalid(shown), cmap=cmap, interpolation="nearest")
+    fig.colorbar(im, ax=ax, shrink=0.8, label=("log10 " if log else "") + title)
+    ax.set_title(title, fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    return _png(fig)
+
+
+def view_bars(names: list[str], residual: list, gross: list) -> bytes:
+    """Per view: median relative residual and gross-error share (bars)."""
+    x = np.arange(len(names))
+    fig, axes = plt.subplots(1, 2, figsize=(max(6, 0.35 * len(names) + 4), 3))
+    for ax, values, title in ((axes[0], residual, "median relative residual"),
+                              (axes[1], gross, "share of gross errors (> 20 % of exposure)")):
+        ax.bar(x, [np.nan if v is None else v for v in values])
+        ax.set_title(title, fontsize=9)
+        ax.set_xticks(x, [str(i) for i in range(len(names))], fontsize=7)
+        ax.set_xlabel("view")
+    return _png(fig)

@@ -27,6 +27,11 @@ SUMMARY_ROWS = [  # (label, dotted path, format)
     ("relighting: SSIM sRGB", "relighting.ssim_srgb", "{:.4f}"),
     ("Mitsuba re-render vs forward model: relative L2", "mitsuba_cross_check.relative_l2", "{:.4f}"),
     ("faces evaluated (specular / diffuse)", None, None),
+    ("self-check: median relative residual", "self_check.residual.median_relative", "{:.4f}"),
+    ("self-check: observations outside 3 robust scales", "self_check.outlier_share", "{:.3f}"),
+    ("self-check: light condition number", "self_check.light_condition", "{:.3g}"),
+    ("self-check: albedo relative standard error (median)", "self_check.albedo_relative_se.median", "{:.4f}"),
+    ("self-check: cross-validated prediction PSNR (dB)", "self_check.cross_validation_psnr", "{:.2f}"),
 ]
 
 
@@ -82,6 +87,12 @@ def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regression
              "<table><tr><th>metric</th><th>value</th></tr>"]
     parts += [f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>" for k, v in summary_rows(metrics)]
     parts.append("</table>")
+    if metrics.get("ground_truth", True) is None:
+        parts.append("<p>No ground truth: this is the self-check report (what the inputs alone say).</p>")
+    warnings = (metrics.get("self_check") or {}).get("warnings") or []
+    if warnings:
+        parts.append("<p class='bad'>Warnings:</p><ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in warnings)
+                     + "</ul>")
     cc = metrics.get("mitsuba_cross_check") or {}
     if "pass" in cc:
         cls = "ok" if cc["pass"] else "bad"

@@ -15,6 +15,7 @@ from estimator.models import NoMitsubaEquivalent
 from estimator.sh import axis_angle_matrix
 from reports.html import compare_page, report_page
 from reports.regression import check
+from reports.selfcheck import self_check
 from reports.report import COMPARE_COLUMNS, Renders, assemble, compare_figures, compare_row, text_table
 
 from harness.io.atomic import atomic_directory, check_output
@@ -54,8 +55,6 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     """
     t0 = time.perf_counter()
     est, run, ds, inputs = open_run(run_dir, dataset_dir, out_dir, overwrite, load_truth=True)
-    if ds.ground_truth is None:
-        raise InputError(f"{ds.path} has no ground_truth/: a report compares with ground truth")
     recorded = run.get("fingerprint")
     if isinstance(recorded, dict):
         current = fingerprint(ds.data)
@@ -65,6 +64,15 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
                              f"differ from those of {ds.path}: report it against its own dataset")
     mesh = ds.data.mesh
     predictor = Predictor(mesh, est)
+    check_metrics, check_figures = self_check(predictor, ds.data.views, run, est)
+    header = {"scene": ds.meta.get("scene", os.path.basename(ds.path)), "dataset": ds.path,
+              "run": os.path.abspath(run_dir), "versions": versions(), "estimate_timings": run.get("timings")}
+    if ds.ground_truth is None:
+        log(f"{ds.path} has no ground_truth/: writing the self-check report only")
+        m = {**header, "method": est.method, "ground_truth": None, "self_check": check_metrics,
+             "report_seconds": time.perf_counter() - t0}
+        _write_report(out_dir, overwrite, inputs, m, None, check_figures, None)
+        return m, None
     views = ds.data.test_views or ds.data.views[:2]
     view_note = "" if ds.data.test_views else "the dataset has no test_frames: training views 0-1 used"
     cams = [v.camera for v in views]
@@ -79,26 +87,33 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
         except NoMitsubaEquivalent as exc:
             renders.estimate_note = f"skipped: {exc}"
 
-    header = {"scene": ds.meta.get("scene", os.path.basename(ds.path)), "dataset": ds.path,
-              "run": os.path.abspath(run_dir), "versions": versions(), "estimate_timings": run.get("timings")}
     content = assemble(predictor, ds.ground_truth, views, renders, header, view_note)
     m = content.metrics
+    m["self_check"] = check_metrics
     regressions = check(m, baseline) if baseline is not None else None
     m["report_seconds"] = time.perf_counter() - t0
+    _write_report(out_dir, overwrite, inputs, m, content.ratios, content.figures + check_figures, regressions,
+                  lambda folder: export_scene(folder, mesh, est, cams[0]))
+    return m, regressions
 
+
+def _write_report(out_dir, overwrite, inputs, metrics, ratios, figs, regressions, export=None) -> None:
+    """The report folder, atomically: metrics.json, ratios.npz (with ground truth), the
+    figures as PNG, report.html, and the estimate as a Mitsuba scene when ``export`` is given."""
     with atomic_directory(out_dir, overwrite=overwrite, inputs=inputs, kind="report") as tmp:
-        dump_json(os.path.join(tmp, "metrics.json"), m)
-        np.savez(os.path.join(tmp, "ratios.npz"), **content.ratios)
-        for index, (section, _, png) in enumerate(content.figures):
+        dump_json(os.path.join(tmp, "metrics.json"), metrics)
+        if ratios is not None:
+            np.savez(os.path.join(tmp, "ratios.npz"), **ratios)
+        for index, (section, _, png) in enumerate(figs):
             with open(os.path.join(tmp, f"fig{index:02d}_{section.lower().replace(' ', '_')}.png"), "wb") as f:
                 f.write(png)
         with open(os.path.join(tmp, "report.html"), "w") as f:
-            f.write(report_page(m, content.figures, regressions))
-        try:
-            export_scene(os.path.join(tmp, "mitsuba"), mesh, est, cams[0])
-        except NoMitsubaEquivalent:
-            pass  # the estimate's model has no single-environment Mitsuba equivalent (see metrics)
-    return m, regressions
+            f.write(report_page(metrics, figs, regressions))
+        if export is not None:
+            try:
+                export(os.path.join(tmp, "mitsuba"))
+            except NoMitsubaEquivalent:
+                pass  # the estimate's model has no single-environment Mitsuba equivalent (see metrics)
 
 
 def find_metrics(folder: str) -> str:

@@ -432,3 +432,26 @@ def test_holdout_views_and_trust_are_recorded_and_read_back(tmp_path, capsys):
     assert est.face_stats["observations"].shape == (80,) and est.face_stats["albedo_se"].shape == (80, 3)
     expect_error(capsys, ["estimate", str(ds), "-o", str(tmp_path / "r2"), "--holdout-views", "5"],
                  "--holdout-views must lie in [1, 4]")
+
+
+def test_report_without_ground_truth_is_the_self_check(tmp_path, capsys):
+    ds = tmp_path / "micro"
+    assert main(["generate", MICRO, "-o", str(ds)]) == 0
+    shutil.rmtree(ds / "ground_truth")
+    run = tmp_path / "run"
+    assert main(["estimate", str(ds), "-o", str(run), "--method", "bilinear-clustered", "--holdout-views", "2"]) == 0
+    assert main(["report", str(run), "-o", str(tmp_path / "rep"), "--no-mitsuba"]) == 0
+    assert "self-check report only" in capsys.readouterr().err
+    m = json.load(open(tmp_path / "rep" / "metrics.json"))
+    assert m["ground_truth"] is None and m["self_check"]["cross_validation_psnr"] > 0
+    assert m["self_check"]["degrees_of_freedom"]["observations"] > 0
+    html = (tmp_path / "rep" / "report.html").read_text()
+    assert "self-check report" in html and html.count("<img") == 3
+    assert not (tmp_path / "rep" / "ratios.npz").exists()
+
+
+def test_report_with_ground_truth_holds_the_self_check_too(copy, tmp_path):
+    _, run, _ = copy
+    assert main(["report", str(run), "-o", str(tmp_path / "rep"), "--no-mitsuba"]) == 0
+    m = json.load(open(tmp_path / "rep" / "metrics.json"))
+    assert "albedo" in m and m["self_check"]["residual"]["median_relative"] >= 0
