@@ -68,7 +68,9 @@ class EstimatorConfig:
         albedo) when its log-albedo spread is below ``uniform_spread``.
     robust_loss : M-estimator of the iteratively reweighted solve ('none': least squares,
         the paper; 'huber', 'cauchy' or 'tukey'; 'auto': the method's own, least squares
-        for the paper's methods, Cauchy for ``bilinear-segmented``), on residuals relative to the face's
+        for ``bilinear-clustered`` (the paper's full method, kept unchanged) and
+        ``known-illumination``, Cauchy for ``bilinear-segmented`` and ``bilinear-per-face``),
+        on residuals relative to the face's
         median colour (:mod:`estimator.robust`).
     robust_rounds : reweighting rounds (each one more bilinear solve).
     glint_ratio : before the first robust solve, a row brighter than this x its face's

@@ -145,6 +145,7 @@ class BilinearPerFace(Method):
     data, ambiguous between diffuse and the constant part of specular otherwise."""
 
     name = "bilinear-per-face"
+    default_loss = "cauchy"  # one glare view ruins a least-squares per-face fit (0.058 within ±10 % against 0.980)
 
     def solve(self, prep):
         group, observed, g = _per_face_groups(prep)

@@ -31,7 +31,7 @@ def initial_weights(face: np.ndarray, rgb: np.ndarray, num_faces: int, ratio: fl
     dominate the first solve; later IRLS rounds judge it by the model's residual."""
     level = face_levels(face, rgb, num_faces)[face]
     norm = np.linalg.norm(rgb, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         w = np.where(norm > ratio * level, (ratio * level / np.maximum(norm, 1e-300)) ** 2, 1.0)
     return np.nan_to_num(w, nan=1.0)
 

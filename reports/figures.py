@@ -114,7 +114,7 @@ def image_comparison(names, predictions, references, masks, title: str) -> bytes
     n = len(names)
     fig, axes = plt.subplots(n, 3, figsize=(8.4, 2.8 * n), squeeze=False)
     for row, name, p, r, m in zip(axes, names, predictions, references, masks):
-        exposure = float(np.percentile(r[m], 99)) if m.any() else 1.0
+        exposure = max(float(np.percentile(r[m], 99)) if m.any() else 1.0, 1e-30)
         s = lstsq_scale(p[m], r[m]) if m.any() else np.ones(3)
         _show(row[0], tonemap(r, exposure), f"{name}: reference")
         _show(row[1], tonemap(p * s, exposure), f"{title}")

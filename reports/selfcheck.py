@@ -15,6 +15,19 @@ from estimator.forward import Predictor
 from . import figures
 
 
+def _number_or_none(value):
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def _valid_views(views) -> list[dict]:
+    """The per-view trust records (a run.json written by another version, or edited, may lack
+    them or hold something else: then there is no per-view section)."""
+    if not isinstance(views, list) or not all(isinstance(v, dict) for v in views):
+        return []
+    return [{"view": str(v.get("view")), "residual": _number_or_none(v.get("residual")),
+             "gross_share": _number_or_none(v.get("gross_share"))} for v in views]
+
+
 def self_check(predictor: Predictor, views: list, run: dict, est, max_views: int = 4
                ) -> tuple[dict, list[tuple[str, str, bytes]]]:
     """(metrics, figures) of the self-check.
@@ -26,8 +39,8 @@ def self_check(predictor: Predictor, views: list, run: dict, est, max_views: int
         ``cross_validation``).
     est : the Estimate (``face_stats`` gives the per-face standard errors).
     """
-    trust = run.get("trust") or {}
-    per_view = trust.get("views") or []
+    trust = run.get("trust") if isinstance(run.get("trust"), dict) else {}
+    per_view = _valid_views(trust.get("views"))
     metrics = {"degrees_of_freedom": run.get("degrees_of_freedom"), "warnings": run.get("warnings", []),
                "residual": trust.get("residual"), "outlier_share": trust.get("outlier_share"),
                "light_condition": trust.get("light_condition"), "albedo_relative_se": trust.get("albedo_relative_se"),

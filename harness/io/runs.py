@@ -93,6 +93,30 @@ def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False,
         dump_json(os.path.join(tmp, "run.json"), run)
 
 
+FACE_STATS = {  # per-face arrays of estimate.npz (face_<name>): trailing shape, integer, inf allowed
+    "observations": ((), True, False), "albedo_se": ((3,), False, True), "albedo_history": ((None, 3), False, False)}
+
+
+def _face_stats(npz: str, data: dict, f: int) -> dict:
+    """The per-face trust arrays of an estimate.npz, each checked for shape, type and values."""
+    out = {}
+    for name, (tail, integer, inf_ok) in FACE_STATS.items():
+        key = f"face_{name}"
+        if key not in data:
+            continue
+        a = data[key]
+        shape_ok = a.ndim == 1 + len(tail) and a.shape[0] == f and all(
+            want is None or got == want for want, got in zip(tail, a.shape[1:]))
+        kind_ok = np.issubdtype(a.dtype, np.integer) if integer else np.issubdtype(a.dtype, np.floating)
+        if not (shape_ok and kind_ok):
+            raise RunError(f"{npz}: {key} must be {'integer' if integer else 'float'} of shape "
+                           f"({f}{''.join(', ' + ('K' if t is None else str(t)) for t in tail)}), got {a.dtype} {a.shape}")
+        if not integer and (np.isnan(a).any() or (not inf_ok and not np.all(np.isfinite(a)))):
+            raise RunError(f"{npz}: {key} contains NaN{'' if inf_ok else ' or Inf'}")
+        out[name] = a
+    return out
+
+
 def read_run(folder: str) -> tuple[Estimate, dict]:
     """(Estimate, run.json dict) of a run folder; anything missing, malformed or
     non-finite raises :class:`RunError` naming the file and key."""
@@ -145,7 +169,7 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
                        f"{config.sh_order} needs {(config.sh_order + 1) ** 2}")
     est = Estimate(data["diffuse"], data["specular"], data[pseudo_key], data["labels"], data["observed"].astype(bool),
                    run["method"], config, {k: run[k] for k in ("timings", "trust", "warnings") if k in run},
-                   data.get("radiance_sh"), {k[5:]: v for k, v in data.items() if k.startswith("face_")})
+                   data.get("radiance_sh"), _face_stats(npz, data, f))
     if est.model.light == "radiance" and est.radiance_sh is None:
         raise RunError(f"{npz}: key 'radiance_sh' missing (the {est.model.name!r} model solves for the radiance)")
     return est, run

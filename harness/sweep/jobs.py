@@ -8,7 +8,6 @@ a job whose folder holds the same identity is not run again.
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import hashlib
 import json
@@ -123,6 +122,3 @@ def dataset_payload(job) -> dict:
     spec = load_spec(job.spec_path, job.profile, job.overrides)
     return {"spec": spec_json(spec)}
 
-
-def describe(obj) -> dict:
-    return dataclasses.asdict(obj)
