@@ -28,14 +28,19 @@ def _sortable(values: list) -> list:
         return sorted(values, key=str)
 
 
+def _key(value):
+    """A hashable stand-in for an axis value (lists and tables as their JSON)."""
+    return json.dumps(value, sort_keys=True) if isinstance(value, (list, dict)) else value
+
+
 def axis_series(rows: list[dict], scene: str, axis: str, key: str) -> dict[str, tuple[list, list, list, list]]:
     """label -> (x values, mean, min, max) of ``key`` over the rows of ``scene``, grouped by
     the value of ``axis`` (rows without the metric are skipped)."""
     out = {}
     sel = [r for r in rows if r["scene"] == scene and axis in r["axes"] and r.get(key) is not None]
     for label in dict.fromkeys(r["label"] for r in sel):
-        xs = _sortable(list(dict.fromkeys(r["axes"][axis] for r in sel if r["label"] == label)))
-        values = [[r[key] for r in sel if r["label"] == label and r["axes"][axis] == x] for x in xs]
+        xs = _sortable(list(dict.fromkeys(_key(r["axes"][axis]) for r in sel if r["label"] == label)))
+        values = [[r[key] for r in sel if r["label"] == label and _key(r["axes"][axis]) == x] for x in xs]
         out[label] = (xs, [float(np.mean(v)) for v in values], [float(np.min(v)) for v in values],
                       [float(np.max(v)) for v in values])
     return out
@@ -45,6 +50,7 @@ def write(folder: str, name: str, rows: list[dict]) -> None:
     """sweep.json (the rows) and sweep.html (the plots and a table) into ``folder``."""
     os.makedirs(folder, exist_ok=True)
     _atomic_text(os.path.join(folder, "sweep.json"), json.dumps({"suite": name, "rows": rows}, indent=1, default=str))
+    name = str(name)
     parts = [f"<html><head><meta charset='utf-8'><title>{html.escape(name)} sweep</title></head><body>",
              f"<h1>Sweep: {html.escape(name)}</h1>"]
     for scene in dict.fromkeys(r["scene"] for r in rows):

@@ -298,8 +298,12 @@ def cmd_estimate(args) -> int:
     est = estimate(ds.data, method, config, **known, log=say, exponent_candidates=candidates)
     if args.holdout_views:
         from estimator.validation import cross_validate
-        cv = cross_validate(ds.data, args.holdout_views,
-                            lambda data: estimate(data, method, config, **known, exponent_candidates=candidates))
+        try:
+            cv = cross_validate(ds.data, args.holdout_views,
+                                lambda data: estimate(data, method, config, **known, exponent_candidates=candidates))
+        except InputError as exc:   # the full solve stands; only the held-out solve failed
+            cv = {"error": f"the solve without the held-out views failed: {exc}", "psnr": None, "held_out": []}
+            est.info.setdefault("warnings", []).append(f"cross-validation failed: {exc}")
         est.info["cross_validation"] = cv
         psnr = "-" if cv["psnr"] is None else f"{cv['psnr']:.2f}"
         _err(f"  cross-validation: {len(cv['held_out'])} views held out, prediction PSNR {psnr} dB")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import os
+import zipfile
 
 import numpy as np
 
@@ -27,8 +28,18 @@ FORMATS = ("per-face", "uv-textures")
 CHANNELS = ("r", "g", "b")
 
 
+def _floats(where: str, value) -> np.ndarray:
+    try:
+        array = np.asarray(value)
+        if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
+            raise TypeError(array.dtype)
+        return array.astype(np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{where} must hold real numbers, got {np.asarray(value).dtype}") from None
+
+
 def _per_face_array(where: str, value, num_faces: int) -> np.ndarray:
-    array = np.asarray(value, dtype=np.float64)
+    array = _floats(where, value)
     if array.shape != (num_faces, 3):
         raise InputError(f"{where} must be ({num_faces}, 3) for the dataset's {num_faces} faces, got {array.shape}")
     if not np.all(np.isfinite(array)):
@@ -51,7 +62,7 @@ def read_per_face(path: str, num_faces: int) -> dict:
         try:
             with np.load(path, allow_pickle=False) as archive:
                 data = {k: archive[k] for k in archive.files}
-        except (OSError, ValueError, EOFError):
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile):
             raise InputError(f"{path}: unreadable (not a .npz archive)") from None
         if "diffuse" not in data:
             raise InputError(f"{path}: key 'diffuse' missing (per-face (F, 3) albedo)")
@@ -60,15 +71,15 @@ def read_per_face(path: str, num_faces: int) -> dict:
                 out[key] = _per_face_array(f"{path}: {key}", data[key], num_faces)
         for key in ("radiance_sh", "pseudo_sh"):
             if key in data:
-                coeffs = np.asarray(data[key], dtype=np.float64)
-                if coeffs.ndim != 2 or coeffs.shape[1] != 3 or int(np.sqrt(len(coeffs))) ** 2 != len(coeffs) \
+                coeffs = _floats(f"{path}: {key}", data[key])
+                if coeffs.ndim != 2 or len(coeffs) == 0 or coeffs.shape[1] != 3 or int(np.sqrt(len(coeffs))) ** 2 != len(coeffs) \
                         or not np.all(np.isfinite(coeffs)):
                     raise InputError(f"{path}: {key} must be finite ((L+1)^2, 3), got {coeffs.shape}")
                 out[key] = coeffs
         return out
     if path.lower().endswith(".csv"):
         try:
-            with open(path, newline="") as f:
+            with open(path, newline="", encoding="utf-8-sig") as f:
                 rows = list(csv.DictReader(f))
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise InputError(f"{path}: unreadable CSV ({exc})") from None
@@ -90,20 +101,18 @@ def face_values_from_texture(mesh: TriangleMesh, textured: TriangleMesh, uv: np.
                              ) -> np.ndarray:
     """(F, C) per-face values of ``texture`` (H, W, C) on ``textured`` (with per-vertex ``uv``)
     for the faces of ``mesh``: the area average over each face when the two meshes have the
-    same faces (count and centroids), else the value at the nearest surface point."""
+    same faces (count and centroids), else the value at the UV centroid of the other mesh's face
+    whose centroid is nearest (a point sample, not an area average)."""
     from harness.scene.textures import sample_uv, uv_texture_average
 
     if textured.num_faces == mesh.num_faces:
         scale = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
         if np.max(np.linalg.norm(textured.centroids - mesh.centroids, axis=1)) <= 1e-6 * max(scale, 1e-300):
             return uv_texture_average(textured, uv, texture)
-    import trimesh
+    from scipy.spatial import cKDTree
 
-    other = trimesh.Trimesh(textured.vertices, textured.faces, process=False)
-    points, _, tri = trimesh.proximity.closest_point(other, mesh.centroids)
-    corners = textured.vertices[textured.faces[tri]]
-    bary = trimesh.triangles.points_to_barycentric(corners, points)
-    return sample_uv(texture, np.einsum("nk,nkd->nd", bary, uv[textured.faces[tri]]))
+    nearest = cKDTree(textured.centroids).query(mesh.centroids)[1]
+    return sample_uv(texture, uv[textured.faces[nearest]].mean(axis=1))
 
 
 def read_uv_textures(mesh: TriangleMesh, mesh_path: str, diffuse_path: str, specular_path: str | None = None,
@@ -117,12 +126,17 @@ def read_uv_textures(mesh: TriangleMesh, mesh_path: str, diffuse_path: str, spec
     out = {"diffuse": None, "specular": None, "radiance_sh": None, "pseudo_sh": None}
     for key, path in (("diffuse", diffuse_path), ("specular", specular_path)):
         if path:
-            out[key] = face_values_from_texture(mesh, textured, uv, read_linear_rgb(path))
+            values = face_values_from_texture(mesh, textured, uv, read_linear_rgb(path))
+            if not np.all(np.isfinite(values)):
+                raise InputError(f"{path}: the texture (or the mesh's UVs) gives NaN or Inf albedos")
+            out[key] = values
     if envmap_path:
         image = read_linear_rgb(envmap_path)
-        if image.shape[1] != 2 * image.shape[0]:
-            raise InputError(f"{envmap_path}: a lat-long map is twice as wide as high, got {image.shape[1]}x"
-                             f"{image.shape[0]}")
+        if not np.all(np.isfinite(image)):
+            raise InputError(f"{envmap_path}: the environment map holds NaN or Inf")
+        if image.shape[0] < 3 or image.shape[1] != 2 * image.shape[0]:
+            raise InputError(f"{envmap_path}: a lat-long map is twice as wide as high and at least 3 rows, got "
+                             f"{image.shape[1]}x{image.shape[0]}")
         out["radiance_sh"] = sh.project_latlong(order, image)
     return out
 
@@ -134,6 +148,8 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
     ``exponent``; a constant light when neither is given) has unit DC per channel, and the
     albedos carry its scale."""
     config = config or EstimatorConfig()
+    if not 0 < exponent <= 1e6:
+        raise InputError(f"--exponent must lie in (0, 1e6], got {exponent}")
     diffuse = arrays["diffuse"]
     specular = arrays["specular"] if arrays["specular"] is not None else np.zeros_like(diffuse)
     m = sh.num_coeffs(config.sh_order)
@@ -152,5 +168,9 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
         raise InputError(f"{source}: the light's mean (DC) must be positive per channel, got {dc}")
     observed = np.isfinite(diffuse).all(axis=1)
     info = {"imported_from": source, "clusters": int(num_faces)}
+    with np.errstate(over="ignore", invalid="ignore"):
+        finite = all(np.all(np.isfinite(a)) for a in (diffuse * dc, specular * dc, pseudo / dc))
+    if not finite:
+        raise InputError(f"{source}: the albedos times the light's DC overflow (values too large)")
     return Estimate(diffuse * dc, specular * dc, pseudo / dc, np.where(observed, np.arange(num_faces), -1),
                     observed, f"imported-{source.split(':')[0]}", config, info)

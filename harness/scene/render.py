@@ -169,6 +169,6 @@ def render_views(scene, cameras: list[Camera], spp: int, seed: int = 0, desc: st
             raise ValueError(f"camera {index} is {cam.width}x{cam.height}, the film is {size[0]}x{size[1]}")
         params["sensor.to_world"] = mi.ScalarTransform4f(gl_to_mitsuba(cam.c2w))
         params.update()
-        image = mi.render(scene, spp=spp, seed=seed * 100003 + index)
+        image = mi.render(scene, spp=spp, seed=(seed * 100003 + index) % 2 ** 32)
         images.append(np.array(image, dtype=np.float32))
     return images

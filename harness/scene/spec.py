@@ -333,16 +333,17 @@ class FaultSpec:
     seed: int = 0
 
     def validate(self) -> None:
-        for key in ("noise_read", "noise_shot", "clip", "pose_rotation", "pose_translation", "vertex_noise"):
-            _num(f"faults.{key}", getattr(self, key), 0)
+        for key, top in (("noise_read", 10.0), ("noise_shot", 10.0), ("clip", 1e6), ("pose_translation", 1.0),
+                         ("vertex_noise", 1.0)):
+            _num(f"faults.{key}", getattr(self, key), 0, top)
         _num("faults.pose_rotation", self.pose_rotation, 0, 45)
         _num("faults.focal_error", self.focal_error, -0.5, 0.5)
         for key in ("glare_views", "occluder_views", "seed"):
-            _num(f"faults.{key}", getattr(self, key), 0, integer=True)
+            _num(f"faults.{key}", getattr(self, key), 0, 2 ** 31 - 1, integer=True)
         for key in ("glare_size", "occluder_size"):
             _num(f"faults.{key}", getattr(self, key), 1, integer=True)
         for key in ("glare_value", "occluder_value"):
-            _num(f"faults.{key}", getattr(self, key))
+            _num(f"faults.{key}", getattr(self, key), -1e6, 1e6)
         if not isinstance(self.ldr, bool):
             raise SpecError(f"faults.ldr must be true or false, got {self.ldr!r}")
 
@@ -451,10 +452,23 @@ def _estimator_defaults(raw: dict) -> dict:
     return dict(raw)
 
 
+def _flatten(overrides: dict, prefix: str = "") -> dict:
+    """Nested override tables as dotted keys ({'cameras': {'count': 5}} -> {'cameras.count': 5}):
+    an override sets keys, it never replaces a whole table."""
+    out = {}
+    for key, value in overrides.items():
+        dotted = f"{prefix}{key}"
+        if isinstance(value, dict) and value:
+            out.update(_flatten(value, dotted + "."))
+        else:
+            out[dotted] = value
+    return out
+
+
 def apply_overrides(raw: dict, overrides: dict[str, Any]) -> dict:
     """Copy of ``raw`` with dotted keys set, e.g. {'cameras.width': 64}."""
     out = copy.deepcopy(raw)
-    for dotted, value in overrides.items():
+    for dotted, value in _flatten(overrides).items():
         node = out
         *parents, leaf = dotted.split(".")
         for key in parents:
@@ -487,6 +501,8 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
         raw = apply_overrides(raw, profiles[profile])
     if overrides:
         raw = apply_overrides(raw, overrides)
+    if not isinstance(raw.get("name"), str) or not raw["name"]:
+        raise SpecError(f"spec.name must be a non-empty string, got {raw.get('name')!r}")
     mat = _table("material", raw.get("material", {}))
     _check_keys("material", mat, MaterialSpec)
     for key in ("diffuse", "specular"):
@@ -501,7 +517,7 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
     spec = SceneSpec(
         name=raw["name"],
         description=_text("spec.description", raw.get("description", "")),
-        seed=_num("spec.seed", raw.get("seed", 0), 0, integer=True),
+        seed=_num("spec.seed", raw.get("seed", 0), 0, 2 ** 31 - 1, integer=True),
         geometry=_build("geometry", raw.get("geometry", {}), GeometrySpec),
         material=MaterialSpec(**mat),
         illumination=IlluminationSpec(**ill),

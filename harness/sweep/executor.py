@@ -77,7 +77,11 @@ def _dask(fn, jobs, scheduler):
         raise InputError("--executor dask needs Dask: pip install '.[dask]'") from None
     if scheduler is None:
         raise InputError("--executor dask needs --scheduler tcp://HOST:PORT")
-    with Client(scheduler) as client:
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, ValueError, TimeoutError) as exc:
+        raise InputError(f"cannot connect to the Dask scheduler {scheduler!r}: {exc}") from None
+    with client:
         futures = client.map(fn, jobs, pure=False)
         index = {f.key: job for f, job in zip(futures, jobs)}
         for future in dask_completed(futures):

@@ -50,7 +50,14 @@ def finished(folder: str, job_id: str) -> dict | None:
             record = json.load(f)
     except (OSError, ValueError):
         return None
-    return record if record.get("id") == job_id else None
+    if not isinstance(record, dict) or record.get("id") != job_id:
+        return None
+    if record.get("kind") == "run" and not (isinstance(record.get("metrics"), dict)
+                                            and os.path.isfile(os.path.join(folder, "report", "metrics.json"))):
+        return None   # a damaged record or a deleted report: run it again
+    if record.get("kind") == "dataset" and not os.path.isfile(os.path.join(folder, "transforms.json")):
+        return None
+    return record
 
 
 def _record(folder: str, record: dict) -> dict:

@@ -42,8 +42,14 @@ def plan(suite: dict, out_dir: str, mitsuba: bool = False, force: bool = False, 
                          "dataset": folder, "scene": d.scene, "axes": d.axes, "seed": d.seed, "label": m.label,
                          "method": m.method, "params": m.params, "mitsuba": mitsuba, "force": force,
                          "variant": variant, "threads": threads})
+    folders: dict[str, str] = {}
+    for r in runs:
+        if folders.setdefault(r["folder"], r["label"]) != r["label"]:
+            raise InputError(f"method labels {folders[r['folder']]!r} and {r['label']!r} map to the same run folder "
+                             f"{os.path.basename(r['folder'])}; give them labels that differ in letters or digits")
     unique = {j["id"]: j for j in datasets}   # two sweep points may resolve to one spec
-    return list(unique.values()), runs
+    unique_runs = {r["id"]: r for r in runs}
+    return list(unique.values()), list(unique_runs.values())
 
 
 def _execute(fn, jobs, what, executor, workers, scheduler, log) -> dict[str, dict]:

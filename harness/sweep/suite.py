@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import os
 import tomllib
 
@@ -76,12 +77,17 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:
     for key in ("scenes", "methods"):
         if not isinstance(raw.get(key), list) or not raw[key]:
             raise SpecError(f"{path}: suite.{key} must be a non-empty list")
+    if not isinstance(raw.get("name", ""), str):
+        raise SpecError(f"{path}: suite.name must be a string, got {raw['name']!r}")
     forced, profile = profile, raw.get("profile")
     if profile is not None and not isinstance(profile, str):
         raise SpecError(f"{path}: suite.profile must be a string")
     seeds = raw.get("seeds", [None])
-    if not isinstance(seeds, list) or not seeds or not all(s is None or (isinstance(s, int) and s >= 0) for s in seeds):
-        raise SpecError(f"{path}: suite.seeds must be a non-empty list of integers >= 0")
+    if not isinstance(seeds, list) or not seeds or not all(
+            s is None or (isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2 ** 31) for s in seeds):
+        raise SpecError(f"{path}: suite.seeds must be a non-empty list of integers in [0, 2^31)")
+    if len(set(seeds)) != len(seeds):
+        raise SpecError(f"{path}: suite.seeds must be distinct, got {seeds}")
     methods = []
     for i, entry in enumerate(raw["methods"]):
         where = f"{path}: methods[{i}]"
@@ -94,10 +100,12 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:
         params = m.get("params", {})
         if not isinstance(params, dict):
             raise SpecError(f"{where}: params must be a table")
+        known = {f.name for f in dataclasses.fields(EstimatorConfig)}
+        unknown = sorted(set(params) - known)
+        if unknown:
+            raise SpecError(f"{where}: params: unknown estimator parameter(s) {', '.join(unknown)}")
         try:
             EstimatorConfig(**params)
-        except TypeError as exc:
-            raise SpecError(f"{where}: params: {exc}") from None
         except ValueError as exc:
             raise SpecError(f"{where}: params: {exc}") from None
         methods.append(MethodEntry(str(m.get("label", m["method"])), m["method"], params))
@@ -111,13 +119,19 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:
         bad = sorted(set(s) - {"scene", "sweep", "set", "profile"})
         if bad:
             raise SpecError(f"{where}: unknown key(s) {', '.join(bad)}")
-        spec_path = resolve_scene(s.get("scene", ""))
+        if not isinstance(s.get("scene"), str) or not s["scene"]:
+            raise SpecError(f"{where}: scene must be a scene name or a spec path, got {s.get('scene')!r}")
+        local = os.path.join(os.path.dirname(os.path.abspath(path)), s["scene"])
+        spec_path = local if os.path.isfile(local) else resolve_scene(s["scene"])
         sweep, fixed = s.get("sweep", {}), s.get("set", {})
         if not isinstance(sweep, dict) or not all(isinstance(v, list) and v for v in sweep.values()):
             raise SpecError(f"{where}: sweep must map dotted spec keys to non-empty lists of values")
         if not isinstance(fixed, dict):
             raise SpecError(f"{where}: set must map dotted spec keys to values")
         axes = sorted(sweep)
+        for axis in axes:
+            if len({json.dumps(v, sort_keys=True) for v in sweep[axis]}) != len(sweep[axis]):
+                raise SpecError(f"{where}: sweep {axis!r} repeats a value: {sweep[axis]}")
         for point in itertools.product(*(sweep[a] for a in axes)):
             values = dict(zip(axes, point))
             for seed in seeds:

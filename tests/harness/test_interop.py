@@ -81,3 +81,32 @@ def test_uv_texture_round_trip_scores_at_ratio_one(tiny_earth, exported, tmp_pat
     m = _report(tmp_path / "run", tmp_path / "report")
     lstsq = m["albedo"]["specular"]["lstsq"]["luminance"]
     assert lstsq["median_ratio"] == pytest.approx(1.0, abs=0.02) and lstsq["within_10"] > 0.95
+
+
+def test_import_refuses_strings_and_broken_archives(tiny_earth, tmp_path, capsys):
+    f = read_dataset(tiny_earth).data.mesh.num_faces
+    np.savez(tmp_path / "str.npz", diffuse=np.array([["a", "b", "c"]] * f))
+    raw = (tmp_path / "str.npz").read_bytes()
+    (tmp_path / "trunc.npz").write_bytes(raw[: len(raw) // 2])
+    for name, needle in (("str.npz", "must hold real numbers"), ("trunc.npz", "unreadable")):
+        assert main(["import", tiny_earth, "--from", "per-face", "--file", str(tmp_path / name),
+                     "-o", str(tmp_path / f"r-{name}")]) == 2
+        assert needle in capsys.readouterr().err
+
+
+def test_uv_textures_on_another_mesh_take_the_nearest_face(tiny_earth, exported, tmp_path):
+    import trimesh
+
+    gt = os.path.join(exported, "ground_truth")
+    other = trimesh.load(os.path.join(gt, "mesh.obj"), process=False, force="mesh")
+    keep = np.arange(0, len(other.faces), 2)            # another mesh: every second face
+    sub = trimesh.Trimesh(other.vertices, other.faces[keep], process=False,
+                          visual=trimesh.visual.TextureVisuals(uv=other.visual.uv))
+    sub.export(str(tmp_path / "half.obj"))
+    assert main(["import", tiny_earth, "--from", "uv-textures", "--mesh", str(tmp_path / "half.obj"),
+                 "--specular", os.path.join(gt, "specular.exr"), "--diffuse", os.path.join(gt, "diffuse.exr"),
+                 "-o", str(tmp_path / "run")]) == 0
+    est, _ = read_run(str(tmp_path / "run"))
+    truth = read_dataset(tiny_earth).ground_truth
+    ratio = (est.specular @ [0.2126, 0.7152, 0.0722]) / (truth.specular @ [0.2126, 0.7152, 0.0722])
+    assert np.median(ratio / np.median(ratio)) == pytest.approx(1.0, abs=0.02)

@@ -6,6 +6,7 @@ import os
 import pytest
 
 from harness.cli.main import main
+from estimator.errors import InputError
 from harness.scene.spec import SpecError
 from harness.sweep import jobs
 from harness.sweep.executor import run_jobs, worker_threads
@@ -112,3 +113,27 @@ def test_smoke_sweep_on_a_spawned_pool_and_on_dask(tmp_path, capsys):
     key = "albedo.diffuse.lstsq.luminance.within_10"
     assert sorted((r["label"], r["axes"]["cameras.count"], r[key]) for r in a) == \
         sorted((r["label"], r["axes"]["cameras.count"], r[key]) for r in b)
+
+
+@pytest.mark.parametrize("text, needle", [
+    ('methods = [{ method = "median-color", label = "a b" }, { method = "bilinear-per-face", label = "a/b" }]\n'
+     'scenes = ["sparse-colored"]', "map to the same run folder"),
+    ('methods = ["median-color"]\nscenes = [{ scene = ["sparse-colored"] }]', "scene must be a scene name"),
+    ('name = 5\nmethods = ["median-color"]\nscenes = ["sparse-colored"]', "suite.name must be a string"),
+    ('methods = [{ method = "median-color", params = { foo = 1 } }]\nscenes = ["sparse-colored"]',
+     "unknown estimator parameter(s) foo"),
+    ('seeds = [1, 1]\nmethods = ["median-color"]\nscenes = ["sparse-colored"]', "seeds must be distinct"),
+])
+def test_more_bad_suites(tmp_path, text, needle):
+    with pytest.raises((SpecError, InputError), match=needle.replace("(", r"\(").replace(")", r"\)")):
+        plan(load_suite(_suite_file(tmp_path, text)), str(tmp_path / "out"))
+
+
+def test_nested_set_tables_merge_into_the_spec(tmp_path):
+    suite = load_suite(_suite_file(tmp_path, 'profile = "tiny"\nmethods = ["median-color"]\n'
+                                              '[[scenes]]\nscene = "sparse-colored"\nset = { cameras.count = 5 }'))
+    from harness.scene.spec import load_spec
+
+    d = suite["datasets"][0]
+    spec = load_spec(d.spec_path, d.profile, d.overrides)
+    assert spec.cameras.count == 5 and spec.cameras.width == 96      # the tiny profile's width is kept
