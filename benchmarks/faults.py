@@ -29,8 +29,9 @@ from harness.io.runs import estimator_settings  # noqa: E402
 from harness.scene.faults import corrupt_dataset  # noqa: E402
 from harness.scene.generate import generate  # noqa: E402
 from harness.scene.spec import FaultSpec, load_spec, resolve_scene  # noqa: E402
-from reports import metrics  # noqa: E402
-from reports.ground_truth import evaluation_mask, true_irradiance  # noqa: E402
+from real_light import score  # noqa: E402
+from reports.figures import sweep_panels  # noqa: E402
+from reports.html import embed_png  # noqa: E402
 
 # (name, fault) in the order of the issue's table; distances: object radius 1, cameras at 4,
 # so 1 cm = 0.0025 of the distance
@@ -47,40 +48,18 @@ CASES = [
 ]
 
 
-def score(ds, truth, est, component: str) -> float:
-    irr = true_irradiance(ds.data.mesh, truth)
-    mask = evaluation_mask(truth, irr, est.observed, component)
-    ratios = metrics.albedo_ratios(getattr(est, component), getattr(truth, component), mask, "lstsq")
-    return metrics.ratio_summary(ratios[:, 3])["within_10"]
-
-
 def sweep_html(rows: list[dict], path: str) -> None:
-    """One page, two inline SVG line plots over the cases (true share, CV PSNR)."""
+    """faults.html: the true ±10 % share and the cross-validated PSNR against the fault (one
+    line per loss; :func:`reports.figures.sweep_panels`), and the table."""
     cases = list(dict.fromkeys(r["fault"] for r in rows))
-    losses = list(dict.fromkeys(r["loss"] for r in rows))
-    colours = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"]
-
-    def plot(key: str, label: str) -> str:
-        values = [r[key] for r in rows if r[key] is not None]
-        lo, hi = (min(values), max(values)) if values else (0.0, 1.0)
-        hi = hi if hi > lo else lo + 1.0
-        w, h, pad = 640, 260, 40
-        out = [f'<svg width="{w}" height="{h + 120}"><text x="5" y="15">{label}</text>']
-        for k, loss in enumerate(losses):
-            pts = []
-            for i, case in enumerate(cases):
-                v = next((r[key] for r in rows if r["fault"] == case and r["loss"] == loss), None)
-                if v is not None:
-                    pts.append(f"{pad + i * (w - 2 * pad) / max(len(cases) - 1, 1):.1f},"
-                               f"{h - pad - (v - lo) / (hi - lo) * (h - 2 * pad):.1f}")
-            out.append(f'<polyline fill="none" stroke="{colours[k % 4]}" stroke-width="2" points="{" ".join(pts)}"/>')
-            out.append(f'<text x="{w - 150}" y="{20 + 15 * k}" fill="{colours[k % 4]}">robust_loss={loss}</text>')
-        for i, case in enumerate(cases):
-            x = pad + i * (w - 2 * pad) / max(len(cases) - 1, 1)
-            out.append(f'<text transform="translate({x:.1f},{h - pad + 12}) rotate(40)" font-size="10">{case}</text>')
-        out.append(f'<text x="2" y="{pad}" font-size="10">{hi:.3g}</text>'
-                   f'<text x="2" y="{h - pad}" font-size="10">{lo:.3g}</text></svg>')
-        return "".join(out)
+    panels = []
+    for key, title in (("within_10", "share within ±10 % (truth)"), ("cv_psnr", "cross-validated PSNR (dB)")):
+        series = {}
+        for loss in dict.fromkeys(r["loss"] for r in rows):
+            values = [next(r[key] for r in rows if r["fault"] == c and r["loss"] == loss) for c in cases]
+            values = [np.nan if v is None else v for v in values]
+            series[f"robust_loss={loss}"] = (cases, values, values, values)
+        panels.append((title, series))
 
     def fmt(value) -> str:
         return "-" if value is None else f"{value:.2f}"
@@ -89,8 +68,7 @@ def sweep_html(rows: list[dict], path: str) -> None:
                     f"<td>{fmt(r['cv_psnr'])}</td><td>{len(r['warnings'])}</td><td>{r['seconds']:.1f}</td></tr>"
                     for r in rows)
     with open(path, "w") as f:
-        f.write("<html><body><h1>Fault sweep (earth-specular)</h1>"
-                + plot("within_10", "share within ±10 % (truth)") + plot("cv_psnr", "cross-validated PSNR (dB)")
+        f.write("<html><body><h1>Fault sweep (earth-specular)</h1>" + embed_png(sweep_panels("fault", panels), "sweep")
                 + "<table border=1><tr><th>fault</th><th>loss</th><th>±10 %</th><th>CV PSNR</th>"
                   "<th>warnings</th><th>s</th></tr>" + table + "</table></body></html>")
 
@@ -120,7 +98,8 @@ def main() -> None:
             seconds = time.perf_counter() - t
             cv = cross_validate(ds.data, args.holdout, lambda d: estimate(d, method, config)) if args.holdout else None
             row = {"fault": name, "loss": loss, "method": method, "seconds": seconds,
-                   "within_10": score(ds, truth, est, config.components if config.components != "both" else "diffuse"),
+                   "within_10": score(ds, truth, est, config.components if config.components != "both"
+                                      else "diffuse")["within_10"],
                    "cv_psnr": None if cv is None else cv["psnr"], "warnings": est.info["warnings"]}
             rows.append(row)
             cvs = "-" if row["cv_psnr"] is None else f"{row['cv_psnr']:.2f}"

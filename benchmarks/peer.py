@@ -22,13 +22,15 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
-from estimator.methods import DEFAULT_METHOD, estimate  # noqa: E402
+from estimator.methods import estimate  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
 from harness.scene.generate import generate  # noqa: E402
 from harness.scene.spec import load_spec, resolve_scene  # noqa: E402
 from reports import metrics  # noqa: E402
+from reports.figures import sweep_panels  # noqa: E402
 from reports.ground_truth import evaluation_mask, true_irradiance  # noqa: E402
+from reports.html import embed_png  # noqa: E402
 
 
 def psnr_of(diffuse, truth, mask) -> float:
@@ -77,25 +79,14 @@ def main() -> None:
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "peer.json"), "w") as f:
         json.dump(rows, f, indent=1)
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from reports.html import embed_png
-    import io
-    fig, axes = plt.subplots(1, len(rows), figsize=(4 * len(rows), 3.2), squeeze=False)
-    for ax, r in zip(axes[0], rows):
-        ax.plot(r["curve_seconds"], r["curve_psnr"], marker="o", label="mitsuba-ad")
-        ax.scatter([r["default_seconds"]], [r["default_psnr"]], color="red", zorder=3, label=DEFAULT_METHOD)
-        ax.set_title(r["case"], fontsize=8)
-        ax.set_xlabel("wall time (s)")
-        ax.set_ylabel("diffuse PSNR (dB)")
-        ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    panels = [(f"{r['case']}: diffuse PSNR (dB)",
+               {"mitsuba-ad": (r["curve_seconds"], r["curve_psnr"], r["curve_psnr"], r["curve_psnr"]),
+                r["default"]:
+                    ([r["default_seconds"]], [r["default_psnr"]], [r["default_psnr"]], [r["default_psnr"]])})
+              for r in rows]
     with open(os.path.join(args.out, "peer.html"), "w") as f:
         f.write("<html><body><h1>Error against time: default method vs mitsuba-ad</h1>"
-                + embed_png(buf.getvalue(), "PSNR against time") + "</body></html>")
+                + embed_png(sweep_panels("wall time (s)", panels), "PSNR against time") + "</body></html>")
     print(f"median: default {np.median([r['default_psnr'] for r in rows]):.2f} dB, mitsuba-ad at equal time "
           f"{np.median([r['peer_psnr_at_default_time'] for r in rows]):.2f} dB, after the budget "
           f"{np.median([r['peer_psnr_final'] for r in rows]):.2f} dB")

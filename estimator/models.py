@@ -140,7 +140,7 @@ class LobeModel(ReflectionModel):
         return lobe_matrix(faces, mirror, sampling, visibility, self.order, self.config.phong_exponent)
 
     def pseudo_from_light(self, light):
-        return light * sh.expand_per_degree(sh.phong_filter(self.order, self.config.phong_exponent))[:, None]
+        return sh.phong_filtered(light, self.config.phong_exponent)
 
     def mitsuba_material(self):
         return MitsubaMaterial("phong", {"exponent": float(self.config.phong_exponent)})

@@ -123,7 +123,7 @@ class MitsubaAD(Method):
         albedo = np.array(opt["object.face_albedo"], dtype=np.float64).reshape(-1, 3)
         env = np.array(opt["emitter.data"], dtype=np.float64)[..., :3]
         radiance = sh.project_latlong(c.sh_order, env)
-        pseudo = radiance * sh.expand_per_degree(sh.phong_filter(c.sh_order, c.phong_exponent))[:, None]
+        pseudo = sh.phong_filtered(radiance, c.phong_exponent)
         dc = np.where(pseudo[0] > 0, pseudo[0], 1.0)
         observed = prep.all_obs.observed_faces()
         f = mesh.num_faces

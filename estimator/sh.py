@@ -203,15 +203,21 @@ def expand_per_degree(per_degree: np.ndarray) -> np.ndarray:
     return per_degree[degrees(per_degree.shape[0] - 1)]
 
 
-def pseudo_illumination(radiance: np.ndarray, exponent: float, order: int | None = None) -> np.ndarray:
-    """Radiance SH (M, C) -> pseudo illumination SH, filtered by the Phong lobe of
-    ``exponent``, truncated to ``order`` and normalised to unit DC per channel
-    (the estimate's gauge)."""
+def phong_filtered(radiance: np.ndarray, exponent: float, order: int | None = None) -> np.ndarray:
+    """Radiance SH (M, C) filtered by the Phong lobe of ``exponent`` (per degree, no
+    renormalisation: the DC is kept), truncated to ``order`` (default: the radiance's)."""
     radiance = np.asarray(radiance, dtype=np.float64)
     have = order_of(radiance.shape[0])
     order = have if order is None else order
     if order > have:
         raise InputError(f"the radiance SH have order {have}, cannot filter to order {order}")
-    out = radiance[: num_coeffs(order)] * expand_per_degree(phong_filter(order, exponent))[:, None]
+    return radiance[: num_coeffs(order)] * expand_per_degree(phong_filter(order, exponent))[:, None]
+
+
+def pseudo_illumination(radiance: np.ndarray, exponent: float, order: int | None = None) -> np.ndarray:
+    """Radiance SH (M, C) -> pseudo illumination SH, filtered by the Phong lobe of
+    ``exponent``, truncated to ``order`` and normalised to unit DC per channel
+    (the estimate's gauge)."""
+    out = phong_filtered(radiance, exponent, order)
     dc = np.where(np.abs(out[0]) > 0, out[0], 1.0)
     return out / dc

@@ -158,6 +158,12 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
         raise DatasetError(f"{where}: {exc}") from None
 
 
+def view_rgba(view: View) -> np.ndarray:
+    """(H, W, 4) float32 RGBA of a view as ``write_dataset`` takes it (alpha 1 when the frame has none)."""
+    alpha = np.ones(view.rgb.shape[:2], np.float32) if view.alpha is None else view.alpha
+    return np.concatenate([view.rgb, alpha[..., None]], axis=2).astype(np.float32)
+
+
 LDR_FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
 
 

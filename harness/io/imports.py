@@ -156,9 +156,8 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
     pseudo = np.zeros((m, 3))
     if arrays.get("pseudo_sh") is not None:
         given = arrays["pseudo_sh"]
-    elif arrays.get("radiance_sh") is not None:   # the filter, without pseudo_illumination's unit-DC scaling
-        radiance = arrays["radiance_sh"][: m]
-        given = radiance * sh.expand_per_degree(sh.phong_filter(sh.order_of(len(radiance)), exponent))[:, None]
+    elif arrays.get("radiance_sh") is not None:   # the DC is kept: the albedos take it below
+        given = sh.phong_filtered(arrays["radiance_sh"][: m], exponent)
     else:
         given = np.array([[1.0, 1.0, 1.0]])
     k = min(m, len(given))

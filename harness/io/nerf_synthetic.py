@@ -24,14 +24,9 @@ from estimator.camera import Camera
 from estimator.config import EstimatorConfig
 from estimator.data import Estimate, View
 
-from harness.io.dataset import Dataset
+from harness.io.dataset import Dataset, view_rgba
 from harness.io.exr import write_exr
 from harness.io.texture import export_textures, srgb8
-
-
-def _rgba(view: View) -> np.ndarray:
-    alpha = np.ones(view.rgb.shape[:2], np.float32) if view.alpha is None else view.alpha
-    return np.concatenate([view.rgb, alpha[..., None]], axis=2).astype(np.float32)
 
 
 def exposure_of(views: list[View]) -> float:
@@ -63,7 +58,7 @@ def write_nerf_synthetic(ds: Dataset, out_dir: str, texture_size: int = 1024) ->
         frames = []
         for k, view in enumerate(items):
             stem = f"{split}/r_{k:03d}"
-            image = _rgba(view)
+            image = view_rgba(view)
             rgba = np.empty(image.shape[:2] + (4,), np.uint8)
             rgba[..., :3] = srgb8(image[..., :3] / exposure)
             rgba[..., 3] = np.round(255 * np.clip(image[..., 3], 0, 1)).astype(np.uint8)

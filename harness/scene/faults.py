@@ -184,16 +184,11 @@ def corrupt_dataset(source: str, out_dir: str, faults: FaultSpec, seed: int = 0,
     import shutil
 
     from harness.io.atomic import atomic_directory
-    from harness.io.dataset import read_dataset, write_dataset
+    from harness.io.dataset import read_dataset, view_rgba, write_dataset
 
     ds = read_dataset(source, load_test=True, load_truth=False)
-
-    def rgba(view):
-        alpha = np.ones(view.rgb.shape[:2], np.float32) if view.alpha is None else view.alpha
-        return np.concatenate([view.rgb, alpha[..., None]], axis=2).astype(np.float32)
-
-    train = [(v.camera, rgba(v)) for v in ds.data.views]
-    test = [(v.camera, rgba(v)) for v in ds.data.test_views]
+    train = [(v.camera, view_rgba(v)) for v in ds.data.views]
+    test = [(v.camera, view_rgba(v)) for v in ds.data.test_views]
     meta = {k: v for k, v in ds.meta.items() if k not in ("frames", "test_frames", "faults")}
     with atomic_directory(out_dir, overwrite=overwrite, inputs=[source, *ds.inputs], kind="dataset") as tmp:
         mesh, views, test_cams, ldr, record = apply_faults(faults, seed, ds.data.mesh, train,

@@ -538,21 +538,27 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
     return spec
 
 
+def read_toml(path: str, what: str) -> dict:
+    """A TOML file as a dict; a missing, unreadable or invalid file is a :class:`SpecError`
+    naming ``what`` it should be (a scene spec, a suite)."""
+    if not os.path.isfile(path):
+        raise SpecError(f"{what} not found: {path}")
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{path} is not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise SpecError(f"{path} is not a text file (a {what} is TOML)") from None
+    except OSError as exc:
+        raise SpecError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+
+
 def load_spec(path: str | os.PathLike, profile: str | None = None,
               overrides: dict[str, Any] | None = None) -> SceneSpec:
     """Read and validate a scene spec TOML file."""
     path = str(path)
-    if not os.path.isfile(path):
-        raise SpecError(f"scene spec not found: {path}")
-    try:
-        with open(path, "rb") as f:
-            raw = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{path} is not valid TOML: {exc}") from exc
-    except UnicodeDecodeError:
-        raise SpecError(f"{path} is not a text file (a scene spec is TOML)") from None
-    except OSError as exc:
-        raise SpecError(f"cannot read scene spec {path}: {exc.strerror or exc}") from None
+    raw = read_toml(path, "scene spec")
     spec = parse_spec(raw, os.path.dirname(os.path.abspath(path)), profile, overrides)
     spec.path = os.path.abspath(path)
     return spec

@@ -20,12 +20,11 @@ import dataclasses
 import itertools
 import json
 import os
-import tomllib
 
 from estimator.config import EstimatorConfig
 from estimator.methods import REGISTRY
 
-from harness.scene.spec import SCENES_DIR, SpecError, load_spec, resolve_scene
+from harness.scene.spec import SCENES_DIR, SpecError, load_spec, read_toml, resolve_scene
 
 SUITE_KEYS = {"name", "scenes", "methods", "profile", "seeds"}
 
@@ -66,11 +65,7 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:
         path = os.path.join(SCENES_DIR, "suites", f"{path_or_name}.toml")
     if not os.path.isfile(path):
         raise SpecError(f"suite not found: {path_or_name}")
-    try:
-        with open(path, "rb") as f:
-            raw = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{path} is not valid TOML: {exc}") from None
+    raw = read_toml(path, "suite")
     unknown = sorted(set(raw) - SUITE_KEYS)
     if unknown:
         raise SpecError(f"{path}: unknown suite key(s): {', '.join(unknown)} (allowed: {', '.join(sorted(SUITE_KEYS))})")
