@@ -442,9 +442,10 @@ _positive_int, _count = _int_at_least(1), _int_at_least(0)
 
 def _add_estimator_flags(p) -> None:
     from estimator.config import COMPONENTS, DIFFUSE_LIGHTS, LOSSES, SPECULAR_MODELS
+    from estimator.methods import DEFAULT_METHOD
 
     p.add_argument("--method", help="registered method (default: the dataset's recommendation, "
-                                    "else bilinear-segmented)")
+                                    f"else {DEFAULT_METHOD})")
     p.add_argument("--components", choices=COMPONENTS)
     p.add_argument("--robust-loss", dest="robust_loss", choices=LOSSES,
                    help="M-estimator of the solve (default auto: the method's own)")

@@ -1,0 +1,149 @@
+"""The light from albedo edges: a Retinex prior on the mesh, solved in the log domain.
+
+Neighbouring faces receive nearly the same light, so wherever their albedos agree the
+ratio of their diffuse radiances is the ratio of their shadings, whatever the albedo.
+Albedo changes are sparse (region boundaries, texture edges); a robust loss lets them
+go. With the shading of face f written as s_f = C_f . L (C the reflection model's
+diffuse rows, with the shadow function; L the light, unit DC per channel), the light
+minimises, per channel,
+
+    sum_edges  rho( (l_i - l_j) - (log s_i - log s_j) )
+  + sum_{f in region r}  rho( l_f - log s_f - a_r )          (optional uniform regions)
+  + ridge * n * sum_lm (l (l + 1))^2 L_lm^2
+
+with l_f the log diffuse radiance of face f and a_r the log albedo of region r. The
+first term is the whole prior for textured objects (no region needed); the second ties
+far-apart faces of one uniform region to one albedo. Gauss-Newton on the IRLS weights of
+the chosen M-estimator (:mod:`estimator.robust`), with steps halved until every shading
+stays positive. Normal equations are accumulated over chunks of rows: memory is linear
+in faces and edges.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import robust
+from .errors import InputError
+from .segmentation import group_quantile
+
+
+def _degrees(m: int) -> np.ndarray:
+    order = int(round(np.sqrt(m))) - 1
+    return np.concatenate([np.full(2 * l + 1, l, dtype=float) for l in range(order + 1)])
+
+
+def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,
+                    labels: np.ndarray | None = None, initial: np.ndarray | None = None,
+                    loss: str = "cauchy", ridge: float = 1e-9, iterations: int = 30,
+                    chunk: int = 100_000) -> tuple[np.ndarray, np.ndarray]:
+    """Light and region albedos that explain the log radiance ratios of neighbouring faces.
+
+    Parameters
+    ----------
+    radiance : (F, 3) diffuse radiance of each face (linear, > 0 where ``usable``).
+    c_matrix : (F, M) diffuse rows: the shading of face f under light L is c_matrix[f] @ L.
+    edges : (E, 2) pairs of neighbouring faces.
+    usable : (F,) bool, faces whose radiance enters the fit.
+    labels : (F,) int uniform region of each face, -1 outside every region (None: edges only).
+    initial : (M, 3) starting light (None: DC only).
+    loss : robust loss of :func:`estimator.robust.irls_weights` ('none' is least squares).
+    ridge : weight of the (l (l + 1))^2 penalty on the light's coefficients, per row.
+    iterations : Gauss-Newton steps per channel (stops earlier when the step is tiny).
+    chunk : rows per block of the normal equations.
+
+    Returns
+    -------
+    light : (M, 3) light with unit DC per channel (the scale is a gauge).
+    region_albedo : (R, 3) albedo of each region (R = labels.max() + 1; (0, 3) without labels).
+    """
+    f, m = c_matrix.shape
+    if radiance.shape != (f, 3) or usable.shape != (f,):
+        raise InputError(f"radiance must be (F, 3) and usable (F,) with F = {f} faces of c_matrix, "
+                         f"got {radiance.shape} and {usable.shape}")
+    if edges.ndim != 2 or edges.shape[1] != 2 or (len(edges) and (edges.min() < 0 or edges.max() >= f)):
+        raise InputError(f"edges must be (E, 2) face indices below {f}, got shape {edges.shape}")
+    labels = np.full(f, -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
+    if labels.shape != (f,):
+        raise InputError(f"labels must be (F,) = ({f},), got {labels.shape}")
+    pair = usable[edges[:, 0]] & usable[edges[:, 1]]
+    i, j = edges[pair, 0], edges[pair, 1]
+    member = np.nonzero(usable & (labels >= 0))[0]
+    group = labels[member]
+    regions = int(labels.max()) + 1 if len(member) else 0
+    if len(i) + len(member) == 0:
+        raise InputError("the light fit needs two usable neighbouring faces or a uniform region")
+    light = np.zeros((m, 3)) if initial is None else np.array(initial[:m], dtype=float)
+    if initial is None:
+        light[0] = 1.0
+    light /= np.where(np.abs(light[0]) > 0, light[0], 1.0)
+    penalty = ridge * (len(i) + len(member)) * (_degrees(m)[1:] * (_degrees(m)[1:] + 1)) ** 2
+    albedo = np.zeros((regions, 3))
+    with np.errstate(divide="ignore"):
+        log_radiance = np.log(np.where(usable[:, None], radiance, 1.0))
+    for c in range(3):
+        light[:, c], albedo[:, c] = _fit_channel(log_radiance[:, c], c_matrix, i, j, member, group, regions,
+                                                 light[:, c], usable, loss, penalty, iterations, chunk)
+    return light, np.exp(albedo)
+
+
+def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, loss, penalty, iterations, chunk):
+    shade = c_matrix @ light
+    if np.any(shade[usable] <= 0):
+        light = np.zeros_like(light)
+        light[0] = 1.0
+        shade = c_matrix @ light
+    log_shade = np.log(np.maximum(shade, 1e-300))
+    alpha = (group_quantile(group, (ell - log_shade)[member][:, None], regions, 0.5, interpolate=True)[:, 0]
+             if regions else np.zeros(0))
+    n = len(light) - 1 + regions
+    for _ in range(iterations):
+        residual = _residuals(ell, log_shade, i, j, member, group, alpha)
+        weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
+        normal, gradient = np.zeros((n, n)), np.zeros(n)
+        normal[: len(light) - 1, : len(light) - 1] += np.diag(penalty)
+        gradient[: len(light) - 1] += penalty * light[1:]
+        for rows, jac in _jacobian_blocks(c_matrix, shade, i, j, member, group, regions, chunk):
+            wj = jac * weights[rows, None]
+            normal += wj.T @ jac
+            gradient += wj.T @ residual[rows]
+        step = -np.linalg.solve(normal + 1e-12 * np.trace(normal) / n * np.eye(n), gradient)
+        t = 1.0
+        while t > 1e-4:
+            trial = light.copy()
+            trial[1:] += t * step[: len(light) - 1]
+            trial_shade = c_matrix @ trial
+            if np.all(trial_shade[usable] > 0):
+                break
+            t *= 0.5
+        else:
+            break  # no positive step: keep the light
+        light, shade = trial, trial_shade
+        log_shade = np.log(np.maximum(shade, 1e-300))
+        alpha = alpha + t * step[len(light) - 1:]
+        if np.linalg.norm(t * step) < 1e-7 * max(1.0, float(np.linalg.norm(light))):
+            break
+    return light, alpha
+
+
+def _residuals(ell, log_shade, i, j, member, group, alpha) -> np.ndarray:
+    """(E' + R',) edge residuals then region residuals."""
+    edge = (ell[i] - ell[j]) - (log_shade[i] - log_shade[j])
+    region = ell[member] - log_shade[member] - alpha[group] if len(member) else np.zeros(0)
+    return np.concatenate([edge, region])
+
+
+def _jacobian_blocks(c_matrix, shade, i, j, member, group, regions, chunk):
+    """Yield (row indices, dense Jacobian block) of :func:`_residuals` with respect to
+    (L[1:], alpha), ``chunk`` rows at a time."""
+    m = c_matrix.shape[1]
+    for start in range(0, len(i), chunk):
+        a, b = i[start: start + chunk], j[start: start + chunk]
+        jac = np.zeros((len(a), m - 1 + regions))
+        jac[:, : m - 1] = -(c_matrix[a, 1:] / shade[a, None] - c_matrix[b, 1:] / shade[b, None])
+        yield np.arange(start, start + len(a)), jac
+    for start in range(0, len(member), chunk):
+        f, g = member[start: start + chunk], group[start: start + chunk]
+        jac = np.zeros((len(f), m - 1 + regions))
+        jac[:, : m - 1] = -c_matrix[f, 1:] / shade[f, None]
+        jac[np.arange(len(f)), m - 1 + g] = -1.0
+        yield len(i) + np.arange(start, start + len(f)), jac

@@ -1,0 +1,74 @@
+"""The edge (Retinex) light fit: exact on noise-free piecewise-uniform data, with and
+without uniform regions; shapes and bad inputs."""
+import numpy as np
+import pytest
+
+from estimator.errors import InputError
+from estimator.retinex import log_shading_fit
+
+
+def _grid(n: int = 24, seed: int = 0):
+    """An n x n grid of faces (4-neighbour edges) with smooth random normals, first-order
+    diffuse rows C_f = [1, n_f / 2], two albedo halves and a coloured light."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:n, 0:n] / n
+    normals = np.stack([np.sin(3 * x + 1) + 0.3 * rng.normal(size=x.shape), np.cos(2 * y),
+                        np.sin(2 * x + 3 * y)], -1).reshape(-1, 3)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    c_matrix = np.column_stack([np.ones(n * n), 0.5 * normals])
+    idx = np.arange(n * n).reshape(n, n)
+    edges = np.concatenate([np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1),
+                            np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)])
+    labels = (x.ravel() >= 0.5).astype(np.int64)
+    albedo = np.array([[0.2, 0.5, 0.05], [0.7, 0.1, 0.6]])[labels]
+    light = np.array([[2.0, 1.0, 0.5], [0.3, -0.2, 0.1], [-0.4, 0.1, 0.2], [0.5, 0.3, -0.1]])
+    radiance = albedo * (c_matrix @ light)
+    return c_matrix, edges, labels, albedo, light, radiance
+
+
+@pytest.mark.parametrize("with_regions", [False, True])
+def test_recovers_the_shading_up_to_scale(with_regions):
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    usable = np.ones(len(radiance), dtype=bool)
+    fit, region_albedo = log_shading_fit(radiance, c_matrix, edges, usable, labels if with_regions else None)
+    assert fit.shape == (4, 3)
+    np.testing.assert_allclose(fit[0], 1.0)                                    # the gauge: unit DC
+    np.testing.assert_allclose(fit, light / light[0], rtol=1e-4, atol=1e-5)      # boundary edges are outliers
+    if with_regions:
+        assert region_albedo.shape == (2, 3)
+        np.testing.assert_allclose(region_albedo[1] / region_albedo[0], albedo[-1] / albedo[0], rtol=1e-4)
+    else:
+        assert region_albedo.shape == (0, 3)
+
+
+def test_least_squares_is_biased_by_albedo_edges():
+    """Without a robust loss the boundary's jump pulls the light: the robust loss is what
+    lets albedo edges go."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    usable = np.ones(len(radiance), dtype=bool)
+    plain, _ = log_shading_fit(radiance, c_matrix, edges, usable, loss="none")
+    assert np.abs(plain - light / light[0]).max() > 1e-2
+
+
+def test_unusable_faces_are_ignored():
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    usable = np.ones(len(radiance), dtype=bool)
+    usable[::7] = False
+    radiance[~usable] = -1.0                                                   # junk where unusable
+    fit, _ = log_shading_fit(radiance, c_matrix, edges, usable)
+    np.testing.assert_allclose(fit, light / light[0], rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda a: {**a, "radiance": a["radiance"][:, :2]}, "radiance must be"),
+    (lambda a: {**a, "usable": a["usable"][:-1]}, "radiance must be"),
+    (lambda a: {**a, "edges": a["edges"] + len(a["usable"])}, "edges must be"),
+    (lambda a: {**a, "labels": np.zeros(3, dtype=int)}, "labels must be"),
+    (lambda a: {**a, "usable": np.zeros_like(a["usable"])}, "needs two usable"),
+])
+def test_bad_inputs_are_named(change, match):
+    c_matrix, edges, labels, albedo, light, radiance = _grid(8)
+    args = {"radiance": radiance, "c_matrix": c_matrix, "edges": edges, "usable": np.ones(len(radiance), bool),
+            "labels": None}
+    with pytest.raises(InputError, match=match):
+        log_shading_fit(**change(args))
