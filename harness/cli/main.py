@@ -389,6 +389,16 @@ def cmd_export(args) -> int:
 
     check_output(args.output, [args.dataset], args.overwrite)
     ds = read_dataset(args.dataset, load_test=True, load_truth=True)
+    if args.format == "mitsuba":
+        from harness.io.mitsuba_views import write_mitsuba_views
+
+        with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.dataset, *ds.inputs],
+                              kind="export") as tmp:
+            summary = write_mitsuba_views(ds, tmp, args.spp)
+        print(f"mitsuba: {summary['train']} train + {summary['test']} test scene XMLs ({summary['material']}, "
+              f"{summary['light']} light, {summary['integrator']} integrator, {summary['spp']} spp) written to "
+              f"{os.path.abspath(args.output)}")
+        return 0
     with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.dataset, *ds.inputs], kind="export") as tmp:
         summary = write_nerf_synthetic(ds, tmp, args.size)
     print(f"nerf-synthetic: {summary['train']} train + {summary['test']} test frames (exposure "
@@ -563,11 +573,13 @@ def build_parser() -> argparse.ArgumentParser:
     tx.add_argument("--overwrite", action="store_true")
     tx.set_defaults(func=cmd_export_texture)
 
-    ex = sub.add_parser("export", help="a dataset in another tool's layout (nerf-synthetic)")
+    ex = sub.add_parser("export", help="a dataset in another tool's layout (nerf-synthetic, or stock Mitsuba "
+                                       "scene XMLs per view)")
     ex.add_argument("dataset")
-    ex.add_argument("--format", choices=("nerf-synthetic",), default="nerf-synthetic")
+    ex.add_argument("--format", choices=("nerf-synthetic", "mitsuba"), default="nerf-synthetic")
     ex.add_argument("-o", "--output", required=True, help="folder to create")
-    ex.add_argument("--size", type=_int_at_least(16), default=1024, help="ground-truth texture size")
+    ex.add_argument("--size", type=_int_at_least(16), default=1024, help="ground-truth texture size (nerf-synthetic)")
+    ex.add_argument("--spp", type=_positive_int, help="samples per pixel of the Mitsuba scenes (default: the dataset's)")
     ex.add_argument("--overwrite", action="store_true")
     ex.set_defaults(func=cmd_export)
 

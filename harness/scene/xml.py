@@ -15,7 +15,7 @@ import numpy as np
 PLUGIN_TAGS = {
     "path": "integrator", "direct": "integrator", "prb": "integrator",
     "ply": "shape", "obj": "shape",
-    "envmap": "emitter", "constant": "emitter", "directional": "emitter",
+    "envmap": "emitter", "constant": "emitter", "directional": "emitter", "point": "emitter", "sunsky": "emitter",
     "perspective": "sensor", "hdrfilm": "film", "box": "rfilter", "gaussian": "rfilter",
     "independent": "sampler", "multijitter": "sampler",
     "mesh_attribute": "texture", "bitmap": "texture",
@@ -24,8 +24,17 @@ PLUGIN_TAGS = {
 }
 
 
+# properties whose three numbers are a direction or a position, not a colour
+VECTOR_PROPERTIES = {"direction", "sun_direction"}
+POINT_PROPERTIES = {"position"}
+
+
 def _property(parent: ET.Element, name: str, value) -> None:
-    if isinstance(value, dict):
+    if hasattr(value, "matrix"):        # a Mitsuba ScalarTransform4f
+        value = np.array(value.matrix, dtype=np.float64)
+    if isinstance(value, dict) and value.get("type") == "rgb":
+        ET.SubElement(parent, "rgb", name=name, value=" ".join(f"{float(v):.9g}" for v in np.ravel(value["value"])))
+    elif isinstance(value, dict):
         _plugin(parent, value, name)
     elif isinstance(value, bool):
         ET.SubElement(parent, "boolean", name=name, value="true" if value else "false")
@@ -40,6 +49,9 @@ def _property(parent: ET.Element, name: str, value) -> None:
         if array.shape == (4, 4):
             transform = ET.SubElement(parent, "transform", name=name)
             ET.SubElement(transform, "matrix", value=" ".join(f"{v:.9g}" for v in array.ravel()))
+        elif array.shape == (3,) and name in VECTOR_PROPERTIES | POINT_PROPERTIES:
+            tag = "vector" if name in VECTOR_PROPERTIES else "point"
+            ET.SubElement(parent, tag, name=name, **{k: f"{v:.9g}" for k, v in zip("xyz", array)})
         elif array.shape == (3,):
             ET.SubElement(parent, "rgb", name=name, value=" ".join(f"{v:.9g}" for v in array))
         else:
@@ -62,7 +74,9 @@ def scene_xml(scene: dict, comment: str | None = None) -> str:
     """The XML text of a scene dictionary ``{'type': 'scene', name: plugin dict, ...}``.
 
     Plugin dictionaries nest as in ``mi.load_dict``; values may be bool, int,
-    float, str, an RGB triple or a 4x4 matrix (a ``to_world`` transform).
+    float, str, an RGB triple (or ``{'type': 'rgb', 'value': ...}``), a direction or
+    position triple (names in ``VECTOR_PROPERTIES`` / ``POINT_PROPERTIES``) or a 4x4
+    matrix or ``ScalarTransform4f`` (a ``to_world`` transform).
     """
     if scene.get("type") != "scene":
         raise ValueError("scene_xml: the top-level dictionary must have type 'scene'")

@@ -110,3 +110,49 @@ def test_uv_textures_on_another_mesh_take_the_nearest_face(tiny_earth, exported,
     truth = read_dataset(tiny_earth).ground_truth
     ratio = (est.specular @ [0.2126, 0.7152, 0.0722]) / (truth.specular @ [0.2126, 0.7152, 0.0722])
     assert np.median(ratio / np.median(ratio)) == pytest.approx(1.0, abs=0.02)
+
+
+STOCK_RENDER = """
+import sys, numpy as np, mitsuba as mi
+mi.set_variant(sys.argv[3])
+np.save(sys.argv[2], np.array(mi.render(mi.load_file(sys.argv[1]), spp=int(sys.argv[4]))))
+"""
+
+
+def test_mitsuba_export_renders_the_dataset_in_stock_mitsuba(tmp_path):
+    """Every frame's scene XML has the frame's camera; a fresh Python with only Mitsuba
+    renders a frame to the dataset's image (measured: means within 0.2 %, 99.9 % of the
+    silhouette pixels agree)."""
+    import subprocess
+    import sys
+    import xml.etree.ElementTree as ET
+
+    from estimator.camera import gl_to_mitsuba
+    from harness.scene.generate import generate
+    from harness.scene.spec import load_spec, resolve_scene
+
+    folder, out = tmp_path / "rl", tmp_path / "mitsuba"
+    generate(load_spec(resolve_scene("real-light"), "tiny", {"material.model": "plastic"}), str(folder))
+    assert main(["export", str(folder), "--format", "mitsuba", "-o", str(out)]) == 0
+    ds = read_dataset(str(folder))
+    frames = [("train", k, v) for k, v in enumerate(ds.data.views)] + [("test", k, v) for k, v in enumerate(ds.data.test_views)]
+    assert sorted(p for p in os.listdir(out) if p.endswith(".xml")) == sorted(f"{s}_{k:03d}.xml" for s, k, _ in frames)
+    for split, k, view in frames:
+        sensor = ET.parse(out / f"{split}_{k:03d}.xml").getroot().find("sensor")
+        matrix = np.array(sensor.find("transform/matrix").get("value").split(), float).reshape(4, 4)
+        np.testing.assert_allclose(matrix, gl_to_mitsuba(view.camera.c2w), atol=1e-7)
+        assert int(sensor.find("film/integer[@name='width']").get("value")) == view.camera.width
+    image = tmp_path / "stock.npy"
+    variant = ds.meta["variant"]
+    subprocess.run([sys.executable, "-c", STOCK_RENDER, "train_000.xml", str(image), variant, "128"], cwd=out,
+                   check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+    stock, view = np.load(image), ds.data.views[0]
+    both = (view.alpha > 0.999) & (stock[..., 3] > 0.999)
+    assert np.mean((view.alpha > 0.5) == (stock[..., 3] > 0.5)) > 0.99
+    np.testing.assert_allclose(stock[..., :3][both].mean(0), view.rgb[both].mean(0), rtol=0.02)
+
+
+def test_mitsuba_export_refuses_a_phong_dataset(tiny_earth, tmp_path, capsys):
+    assert main(["export", tiny_earth, "--format", "mitsuba", "-o", str(tmp_path / "m")]) == 2
+    assert "stock Mitsuba 3 has no such BSDF" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()

@@ -1,0 +1,127 @@
+"""A dataset as stock Mitsuba 3 scenes: one XML per view that renders it with no pseudolight import.
+
+Layout::
+
+    object.ply        the mesh, one vertex triple per face (face order kept), with UVs into
+    albedo.exr        a one-texel-per-face atlas of the true diffuse albedo (linear)
+    envmap.exr        the light, when it is an environment map
+    train_000.xml ... test_000.xml   one scene per frame: the same shape, BSDF, emitters and
+                      integrator as the generator used, and that frame's camera
+
+Only Mitsuba's own plugins appear: ``diffuse``, ``plastic`` or ``roughplastic`` with a
+``bitmap`` texture; ``envmap``, ``directional``, ``point`` or ``sunsky``; ``path`` (or
+``direct`` for delta lights, which samples one light per sample where the generator loops
+over them: the same expectation, more noise); the generator's ``perspective`` sensor with an
+RGBA ``hdrfilm`` (:func:`estimator.camera.mitsuba_sensor`).
+Datasets rendered with pseudolight's Phong BSDF have no stock equivalent and are refused.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+
+import numpy as np
+
+from estimator.camera import mitsuba_sensor
+from estimator.errors import InputError
+
+from harness.io.dataset import Dataset
+from harness.io.exr import write_exr
+from harness.io.jsonio import load_json
+from harness.scene.render import bsdf_dict, face_atlas
+from harness.scene.xml import scene_xml
+
+STOCK_MATERIALS = ("diffuse", "plastic", "roughplastic")
+
+
+def _write_uv_ply(path: str, corners: np.ndarray, uv: np.ndarray) -> None:
+    """Binary PLY with unshared vertices: face i is vertices 3i..3i+2, with UVs (u, v)."""
+    f = len(corners)
+    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {3 * f}\n"
+              "property float x\nproperty float y\nproperty float z\nproperty float u\nproperty float v\n"
+              f"element face {f}\nproperty list uchar int vertex_indices\nend_header\n")
+    vertices = np.concatenate([corners.reshape(-1, 3), uv.reshape(-1, 2)], axis=1).astype("<f4")
+    faces = np.empty(f, dtype=np.dtype([("n", "u1"), ("v", "<i4", 3)]))
+    faces["n"] = 3
+    faces["v"] = np.arange(3 * f, dtype=np.int32).reshape(f, 3)
+    with open(path, "wb") as out:
+        out.write(header.encode("ascii"))
+        out.write(vertices.tobytes())
+        out.write(faces.tobytes())
+
+
+def _emitters(illumination: dict) -> dict:
+    """Emitter dicts of a ground-truth ``illumination`` record (illumination.json)."""
+    kind = illumination["kind"]
+    if kind == "directional":
+        return {f"light_{k:03d}": {"type": "directional", "direction": (-np.asarray(l["to_light"], float)).tolist(),
+                                   "irradiance": {"type": "rgb", "value": l["irradiance"]}}
+                for k, l in enumerate(illumination["lights"])}
+    if kind == "point":
+        return {f"light_{k:03d}": {"type": "point", "position": l["position"],
+                                   "intensity": {"type": "rgb", "value": l["intensity"]}}
+                for k, l in enumerate(illumination["lights"])}
+    to_world = np.eye(4)
+    to_world[:3, :3] = np.asarray(illumination.get("rotation", np.eye(3)), float)
+    if kind == "envmap":
+        return {"envmap": {"type": "envmap", "filename": "envmap.exr", "to_world": to_world}}
+    if kind == "sunsky":
+        from harness.scene.illumination import Illumination, sunsky_emitter
+
+        light = Illumination.from_json(illumination)
+        return {"sunsky": sunsky_emitter(_NumpyTransforms, light)}
+    raise InputError(f"illumination kind {kind!r} has no stock Mitsuba emitter here")
+
+
+class _NumpyTransforms:
+    """Stands in for the mitsuba module where a dict builder only wraps matrices: the
+    dicts then hold plain 4x4 arrays, which the XML writer takes."""
+
+    @staticmethod
+    def ScalarTransform4f(matrix):  # noqa: N802 (Mitsuba's name)
+        return np.asarray(matrix, dtype=np.float64)
+
+
+def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> dict:
+    """Write the stock-Mitsuba scenes of ``ds`` (read with its ground truth and test views)
+    into the existing folder ``out_dir``. ``spp``: samples per pixel (default: the dataset's).
+    Returns a summary (frame counts, material, light kind, integrator)."""
+    truth = ds.ground_truth
+    if truth is None:
+        raise InputError(f"--format mitsuba needs {os.path.join(ds.path, 'ground_truth')}/ (the true materials "
+                         "and light); this dataset has none")
+    model = truth.brdf.get("model")
+    if model not in STOCK_MATERIALS:
+        raise InputError(f"the dataset's material is {model!r}: stock Mitsuba 3 has no such BSDF (pseudolight's "
+                         f"Phong is a plugin); --format mitsuba exports datasets made with {', '.join(STOCK_MATERIALS)}")
+    record = load_json(os.path.join(ds.path, "ground_truth", "illumination.json"), "the ground-truth light")
+    render = record.get("scene_spec", {}).get("render", {})
+    emitters = _emitters(record["illumination"])
+    if "envmap" in emitters:
+        source = os.path.join(ds.path, "ground_truth", record["illumination"].get("envmap_file", "envmap.exr"))
+        if not os.path.isfile(source):
+            raise InputError(f"{source} is missing: the envmap light cannot be exported")
+        shutil.copyfile(source, os.path.join(out_dir, "envmap.exr"))
+    image, uv = face_atlas(np.asarray(truth.diffuse, np.float32))
+    write_exr(os.path.join(out_dir, "albedo.exr"), image)
+    _write_uv_ply(os.path.join(out_dir, "object.ply"), ds.data.mesh.corners, uv)
+    bsdf = bsdf_dict(truth.brdf)
+    key = "reflectance" if bsdf["type"] == "diffuse" else "diffuse_reflectance"
+    bsdf[key] = {**bsdf[key], "filename": "albedo.exr"}
+    if render.get("integrator", "path") == "path":
+        integrator = {"type": "path", "max_depth": int(render.get("max_depth", 6)), "hide_emitters": True}
+    else:
+        integrator = {"type": "direct", "hide_emitters": True}
+    shape = {"type": "ply", "filename": "object.ply", "face_normals": True, "bsdf": bsdf}
+    samples = int(spp or ds.meta.get("spp", 64))
+    counts = {}
+    for split, views in (("train", ds.data.views), ("test", ds.data.test_views)):
+        for k, view in enumerate(views):
+            scene = {"type": "scene", "integrator": integrator, "object": shape, **emitters,
+                     "sensor": mitsuba_sensor(_NumpyTransforms, view.camera, samples)}
+            comment = f"pseudolight dataset {os.path.basename(os.path.abspath(ds.path))}, {split} frame {k} ({view.name})"
+            with open(os.path.join(out_dir, f"{split}_{k:03d}.xml"), "w") as f:
+                f.write(scene_xml(scene, comment))
+        counts[split] = len(views)
+    return {**counts, "material": model, "light": record["illumination"]["kind"], "integrator": integrator["type"],
+            "spp": samples}
