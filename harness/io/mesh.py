@@ -36,3 +36,20 @@ def save_mesh_ply(mesh: TriangleMesh, path: str | os.PathLike) -> None:
     """Write a binary PLY in the mesh's exact vertex and face order."""
     t = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
     t.export(str(path), file_type="ply")
+
+
+def write_uv_ply(path: str, corners: np.ndarray, uv: np.ndarray) -> None:
+    """Binary PLY with unshared vertices, which Mitsuba's ``ply`` shape reads: face i is
+    vertices 3i..3i+2 (``corners`` (F, 3, 3)) with UVs (u, v) (``uv`` (F, 3, 2))."""
+    f = len(corners)
+    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {3 * f}\n"
+              "property float x\nproperty float y\nproperty float z\nproperty float u\nproperty float v\n"
+              f"element face {f}\nproperty list uchar int vertex_indices\nend_header\n")
+    vertices = np.concatenate([corners.reshape(-1, 3), uv.reshape(-1, 2)], axis=1).astype("<f4")
+    faces = np.empty(f, dtype=np.dtype([("n", "u1"), ("v", "<i4", 3)]))
+    faces["n"] = 3
+    faces["v"] = np.arange(3 * f, dtype=np.int32).reshape(f, 3)
+    with open(path, "wb") as out:
+        out.write(header.encode("ascii"))
+        out.write(vertices.tobytes())
+        out.write(faces.tobytes())

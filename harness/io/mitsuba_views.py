@@ -28,26 +28,11 @@ from estimator.errors import InputError
 from harness.io.dataset import Dataset
 from harness.io.exr import write_exr
 from harness.io.jsonio import load_json
+from harness.io.mesh import write_uv_ply
 from harness.scene.render import bsdf_dict, face_atlas
-from harness.scene.xml import scene_xml
+from harness.scene.xml import NUMPY_TRANSFORMS, scene_xml
 
 STOCK_MATERIALS = ("diffuse", "plastic", "roughplastic")
-
-
-def _write_uv_ply(path: str, corners: np.ndarray, uv: np.ndarray) -> None:
-    """Binary PLY with unshared vertices: face i is vertices 3i..3i+2, with UVs (u, v)."""
-    f = len(corners)
-    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {3 * f}\n"
-              "property float x\nproperty float y\nproperty float z\nproperty float u\nproperty float v\n"
-              f"element face {f}\nproperty list uchar int vertex_indices\nend_header\n")
-    vertices = np.concatenate([corners.reshape(-1, 3), uv.reshape(-1, 2)], axis=1).astype("<f4")
-    faces = np.empty(f, dtype=np.dtype([("n", "u1"), ("v", "<i4", 3)]))
-    faces["n"] = 3
-    faces["v"] = np.arange(3 * f, dtype=np.int32).reshape(f, 3)
-    with open(path, "wb") as out:
-        out.write(header.encode("ascii"))
-        out.write(vertices.tobytes())
-        out.write(faces.tobytes())
 
 
 def _emitters(illumination: dict) -> dict:
@@ -69,17 +54,8 @@ def _emitters(illumination: dict) -> dict:
         from harness.scene.illumination import Illumination, sunsky_emitter
 
         light = Illumination.from_json(illumination)
-        return {"sunsky": sunsky_emitter(_NumpyTransforms, light)}
+        return {"sunsky": sunsky_emitter(NUMPY_TRANSFORMS, light)}
     raise InputError(f"illumination kind {kind!r} has no stock Mitsuba emitter here")
-
-
-class _NumpyTransforms:
-    """Stands in for the mitsuba module where a dict builder only wraps matrices: the
-    dicts then hold plain 4x4 arrays, which the XML writer takes."""
-
-    @staticmethod
-    def ScalarTransform4f(matrix):  # noqa: N802 (Mitsuba's name)
-        return np.asarray(matrix, dtype=np.float64)
 
 
 def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> dict:
@@ -104,7 +80,7 @@ def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> di
         shutil.copyfile(source, os.path.join(out_dir, "envmap.exr"))
     image, uv = face_atlas(np.asarray(truth.diffuse, np.float32))
     write_exr(os.path.join(out_dir, "albedo.exr"), image)
-    _write_uv_ply(os.path.join(out_dir, "object.ply"), ds.data.mesh.corners, uv)
+    write_uv_ply(os.path.join(out_dir, "object.ply"), ds.data.mesh.corners, uv)
     bsdf = bsdf_dict(truth.brdf)
     key = "reflectance" if bsdf["type"] == "diffuse" else "diffuse_reflectance"
     bsdf[key] = {**bsdf[key], "filename": "albedo.exr"}
@@ -118,7 +94,7 @@ def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> di
     for split, views in (("train", ds.data.views), ("test", ds.data.test_views)):
         for k, view in enumerate(views):
             scene = {"type": "scene", "integrator": integrator, "object": shape, **emitters,
-                     "sensor": mitsuba_sensor(_NumpyTransforms, view.camera, samples)}
+                     "sensor": mitsuba_sensor(NUMPY_TRANSFORMS, view.camera, samples)}
             comment = f"pseudolight dataset {os.path.basename(os.path.abspath(ds.path))}, {split} frame {k} ({view.name})"
             with open(os.path.join(out_dir, f"{split}_{k:03d}.xml"), "w") as f:
                 f.write(scene_xml(scene, comment))

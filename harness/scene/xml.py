@@ -19,10 +19,22 @@ PLUGIN_TAGS = {
     "perspective": "sensor", "hdrfilm": "film", "box": "rfilter", "gaussian": "rfilter",
     "independent": "sampler", "multijitter": "sampler",
     "mesh_attribute": "texture", "bitmap": "texture",
-    "diffuse": "bsdf", "conductor": "bsdf", "blendbsdf": "bsdf", "plastic": "bsdf", "roughplastic": "bsdf",
+    "diffuse": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf", "plastic": "bsdf", "roughplastic": "bsdf",
     "pseudolight_phong": "bsdf", "pseudolight_diffuse_mirror": "bsdf",
 }
 
+
+class _NumpyTransforms:
+    """Stands in for the mitsuba module where a dict builder only wraps matrices
+    (``mi.ScalarTransform4f``): the dicts then hold plain 4x4 arrays, which this writer
+    takes, and nothing of Mitsuba is loaded."""
+
+    @staticmethod
+    def ScalarTransform4f(matrix):  # noqa: N802 (Mitsuba's name)
+        return np.asarray(matrix, dtype=np.float64)
+
+
+NUMPY_TRANSFORMS = _NumpyTransforms()
 
 # properties whose three numbers are a direction or a position, not a colour
 VECTOR_PROPERTIES = {"direction", "sun_direction"}

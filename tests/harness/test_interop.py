@@ -143,7 +143,7 @@ def test_mitsuba_export_renders_the_dataset_in_stock_mitsuba(tmp_path):
         np.testing.assert_allclose(matrix, gl_to_mitsuba(view.camera.c2w), atol=1e-7)
         assert int(sensor.find("film/integer[@name='width']").get("value")) == view.camera.width
     image = tmp_path / "stock.npy"
-    variant = ds.meta["variant"]
+    variant = ds.meta["variant"]      # generate() set it, and DRJIT_LIBLLVM_PATH for the child
     subprocess.run([sys.executable, "-c", STOCK_RENDER, "train_000.xml", str(image), variant, "128"], cwd=out,
                    check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
     stock, view = np.load(image), ds.data.views[0]
