@@ -409,17 +409,20 @@ def cmd_export(args) -> int:
 
 def cmd_import(args) -> int:
     from harness.io.dataset import fingerprint, read_dataset
-    from harness.io.imports import imported_estimate, read_per_face, read_uv_textures
+    from harness.io.imports import imported_estimate, read_mitsuba_xml, read_per_face, read_uv_textures
     from harness.io.runs import write_run
 
     files = [p for p in (args.file, args.mesh, args.diffuse, args.specular, args.envmap) if p]
     check_output(args.output, [args.dataset, *files], args.overwrite)
     ds = read_dataset(args.dataset, load_test=False, load_truth=False)
     f = ds.data.mesh.num_faces
+    if args.source in ("per-face", "mitsuba-xml") and not args.file:
+        raise InputError(f"--from {args.source} needs --file " + ("RESULTS.npz|.csv" if args.source == "per-face"
+                                                                   else "SCENE.xml"))
     if args.source == "per-face":
-        if not args.file:
-            raise InputError("--from per-face needs --file RESULTS.npz|.csv")
         arrays = read_per_face(args.file, f)
+    elif args.source == "mitsuba-xml":
+        arrays = read_mitsuba_xml(ds.data.mesh, args.file)
     else:
         if not (args.mesh and args.diffuse):
             raise InputError("--from uv-textures needs --mesh MESH_WITH_UVS and --diffuse TEXTURE "
@@ -583,10 +586,11 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--overwrite", action="store_true")
     ex.set_defaults(func=cmd_export)
 
-    im = sub.add_parser("import", help="another method's result (per-face arrays or UV textures) as a run")
+    im = sub.add_parser("import", help="another method's result (per-face arrays, UV textures or a Mitsuba scene XML) as a run")
     im.add_argument("dataset")
-    im.add_argument("--from", dest="source", choices=("per-face", "uv-textures"), required=True)
-    im.add_argument("--file", help="per-face .npz (diffuse, specular, radiance_sh|pseudo_sh) or .csv")
+    im.add_argument("--from", dest="source", choices=("per-face", "uv-textures", "mitsuba-xml"), required=True)
+    im.add_argument("--file", help="per-face .npz (diffuse, specular, radiance_sh|pseudo_sh) or .csv; or a Mitsuba "
+                                   "scene .xml")
     im.add_argument("--mesh", help="mesh file with texture coordinates (OBJ/PLY/glTF)")
     im.add_argument("--diffuse", help="diffuse texture (PNG/JPEG sRGB, EXR/HDR linear)")
     im.add_argument("--specular", help="specular texture")

@@ -11,10 +11,11 @@ from estimator.errors import InputError
 from harness.io.exr import read_exr
 
 
-def read_linear_rgb(path: str | os.PathLike) -> np.ndarray:
+def read_linear_rgb(path: str | os.PathLike, raw: bool = False) -> np.ndarray:
     """Any image Mitsuba reads (PNG, JPEG, HDR, EXR) as linear Rec.709 float32 (H, W, 3).
 
-    8-bit images are taken as sRGB-encoded and linearised.
+    8-bit images are taken as sRGB-encoded and linearised, unless ``raw`` (Mitsuba's
+    ``bitmap`` option of that name): then their stored values are used as they are.
     """
     path = str(path)
     if not os.path.isfile(path):
@@ -26,7 +27,8 @@ def read_linear_rgb(path: str | os.PathLike) -> np.ndarray:
         bitmap = mi.Bitmap(path)
     except Exception as exc:
         raise InputError(f"cannot read image {path}: {exc}") from exc
-    linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+    linear = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32,
+                            srgb_gamma=bool(raw and bitmap.srgb_gamma()))
     image = np.array(linear, dtype=np.float32)
     if image.ndim == 2:
         image = np.repeat(image[..., None], 3, axis=2)

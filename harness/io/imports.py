@@ -1,6 +1,8 @@
 """Other tools' results as pseudolight estimates, so ``report`` and ``compare`` score them
 like any run: per-face arrays (``.npz`` or ``.csv``) or UV textures on a mesh with UVs
-plus a lat-long environment map (what nvdiffrec-like tools write).
+plus a lat-long environment map (what nvdiffrec-like tools write), or a Mitsuba 3 scene XML
+whose mesh shape has a ``diffuse``, ``plastic``, ``roughplastic`` or ``principled`` BSDF
+(or a ``blendbsdf`` of those with a ``conductor``) with bitmap textures, and an ``envmap``.
 
 Per-face albedo from a texture is its area average over each face's UV triangle. When the
 textured mesh is not the dataset's (another face count, or faces elsewhere), each dataset
@@ -24,7 +26,7 @@ from estimator.errors import InputError
 from harness.io.images import read_linear_rgb
 from harness.io.mesh import load_mesh_with_uv
 
-FORMATS = ("per-face", "uv-textures")
+FORMATS = ("per-face", "uv-textures", "mitsuba-xml")
 CHANNELS = ("r", "g", "b")
 
 
@@ -97,22 +99,42 @@ def read_per_face(path: str, num_faces: int) -> dict:
     raise InputError(f"{path}: per-face results must be .npz or .csv")
 
 
-def face_values_from_texture(mesh: TriangleMesh, textured: TriangleMesh, uv: np.ndarray, texture: np.ndarray
-                             ) -> np.ndarray:
+def face_values_from_texture(mesh: TriangleMesh, textured: TriangleMesh, uv: np.ndarray, texture: np.ndarray,
+                             nearest: bool = False) -> np.ndarray:
     """(F, C) per-face values of ``texture`` (H, W, C) on ``textured`` (with per-vertex ``uv``)
     for the faces of ``mesh``: the area average over each face when the two meshes have the
     same faces (count and centroids), else the value at the UV centroid of the other mesh's face
-    whose centroid is nearest (a point sample, not an area average)."""
+    whose centroid is nearest (a point sample, not an area average). ``nearest``: texel
+    lookup without bilinear blending (a texture meant for nearest filtering)."""
     from harness.scene.textures import sample_uv, uv_texture_average
 
     if textured.num_faces == mesh.num_faces:
         scale = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
         if np.max(np.linalg.norm(textured.centroids - mesh.centroids, axis=1)) <= 1e-6 * max(scale, 1e-300):
-            return uv_texture_average(textured, uv, texture)
+            return uv_texture_average(textured, uv, texture, nearest=nearest)
     from scipy.spatial import cKDTree
 
-    nearest = cKDTree(textured.centroids).query(mesh.centroids)[1]
-    return sample_uv(texture, uv[textured.faces[nearest]].mean(axis=1))
+    closest = cKDTree(textured.centroids).query(mesh.centroids)[1]
+    return sample_uv(texture, uv[textured.faces[closest]].mean(axis=1), nearest)
+
+
+def _texture_faces(mesh: TriangleMesh, textured: TriangleMesh, uv: np.ndarray, path: str, raw: bool = False,
+                   nearest: bool = False) -> np.ndarray:
+    values = face_values_from_texture(mesh, textured, uv, read_linear_rgb(path, raw), nearest)
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"{path}: the texture (or the mesh's UVs) gives NaN or Inf albedos")
+    return values
+
+
+def _envmap_sh(path: str, order: int) -> np.ndarray:
+    """(M, 3) radiance SH of a lat-long map in Mitsuba's envmap orientation."""
+    image = read_linear_rgb(path)
+    if not np.all(np.isfinite(image)):
+        raise InputError(f"{path}: the environment map holds NaN or Inf")
+    if image.shape[0] < 3 or image.shape[1] != 2 * image.shape[0]:
+        raise InputError(f"{path}: a lat-long map is twice as wide as high and at least 3 rows, got "
+                         f"{image.shape[1]}x{image.shape[0]}")
+    return sh.project_latlong(order, image)
 
 
 def read_uv_textures(mesh: TriangleMesh, mesh_path: str, diffuse_path: str, specular_path: str | None = None,
@@ -126,19 +148,153 @@ def read_uv_textures(mesh: TriangleMesh, mesh_path: str, diffuse_path: str, spec
     out = {"diffuse": None, "specular": None, "radiance_sh": None, "pseudo_sh": None}
     for key, path in (("diffuse", diffuse_path), ("specular", specular_path)):
         if path:
-            values = face_values_from_texture(mesh, textured, uv, read_linear_rgb(path))
-            if not np.all(np.isfinite(values)):
-                raise InputError(f"{path}: the texture (or the mesh's UVs) gives NaN or Inf albedos")
-            out[key] = values
+            out[key] = _texture_faces(mesh, textured, uv, path)
     if envmap_path:
-        image = read_linear_rgb(envmap_path)
-        if not np.all(np.isfinite(image)):
-            raise InputError(f"{envmap_path}: the environment map holds NaN or Inf")
-        if image.shape[0] < 3 or image.shape[1] != 2 * image.shape[0]:
-            raise InputError(f"{envmap_path}: a lat-long map is twice as wide as high and at least 3 rows, got "
-                             f"{image.shape[1]}x{image.shape[0]}")
-        out["radiance_sh"] = sh.project_latlong(order, image)
+        out["radiance_sh"] = _envmap_sh(envmap_path, order)
     return out
+
+
+# Mitsuba BSDFs and the property that holds their diffuse albedo
+DIFFUSE_PROPERTY = {"diffuse": "reflectance", "plastic": "diffuse_reflectance",
+                    "roughplastic": "diffuse_reflectance", "principled": "base_color"}
+MIRRORS = ("conductor", "roughconductor")
+
+
+def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:
+    """Per-face albedos and the radiance SH of a Mitsuba 3 scene XML, for the dataset's ``mesh``.
+
+    The scene's first ``ply``/``obj`` shape with a BSDF is read (its ``to_world`` matrix
+    applied): ``diffuse``, ``plastic``, ``roughplastic`` (diffuse albedo only; the coat is
+    not a per-face albedo) or ``principled`` (``base_color``), inside ``twosided`` or as a
+    ``blendbsdf`` of constant ``weight`` w whose first child contributes (1 - w) x its
+    albedo and second w x its albedo (a ``conductor``/``roughconductor`` child is the
+    specular albedo: its ``specular_reflectance``). Albedos are ``bitmap`` textures (relative
+    paths from the XML's folder; 8-bit files are sRGB unless ``raw``; a PLY's v runs top-down
+    as Mitsuba reads it, an OBJ's bottom-up) or constant ``rgb`` / ``float`` values. The light is the first ``envmap`` emitter (``scale`` and the rotation
+    of ``to_world`` applied) or ``constant`` emitter.
+    """
+    import xml.etree.ElementTree as ET
+
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise InputError(f"{path}: not a readable XML file ({exc})") from None
+    if root.tag != "scene":
+        raise InputError(f"{path}: the root element is <{root.tag}>, not a Mitsuba <scene>")
+    by_id = {e.get("id"): e for e in root.iter() if e.get("id")}
+
+    def resolve(element):
+        if element is not None and element.tag == "ref":
+            target = by_id.get(element.get("id"))
+            if target is None:
+                raise InputError(f"{path}: <ref id={element.get('id')!r}> names no element")
+            return target
+        return element
+
+    def child_bsdf(element):
+        return resolve(next((c for c in element if c.tag in ("bsdf", "ref")), None))
+
+    shape = next((s for s in root.findall("shape") if s.get("type") in ("ply", "obj") and child_bsdf(s) is not None),
+                 None)
+    if shape is None:
+        raise InputError(f"{path}: no <shape type='ply'|'obj'> with a BSDF")
+    filename = _xml_value(shape, "string", "filename", path)
+    textured, uv = load_mesh_with_uv(os.path.join(folder, filename))
+    if uv is None:
+        raise InputError(f"{filename}: the mesh has no per-vertex texture coordinates")
+    if shape.get("type") == "ply":   # Mitsuba uses a PLY's v as stored, top-down (its OBJ loader flips v)
+        uv = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])
+    matrix = _xml_matrix(shape, path)
+    if matrix is not None:
+        textured = TriangleMesh(textured.vertices @ matrix[:3, :3].T + matrix[:3, 3], textured.faces)
+    bsdf = child_bsdf(shape)
+    parts = {"diffuse": np.zeros((mesh.num_faces, 3)), "specular": np.zeros((mesh.num_faces, 3))}
+
+    def albedo(element, name, default):
+        """(F, 3) per-face values of property ``name`` of ``element``."""
+        for child in element:
+            if child.get("name") != name:
+                continue
+            if child.tag == "texture" and child.get("type") == "bitmap":
+                raw = child.find("boolean[@name='raw']")
+                nearest = child.find("string[@name='filter_type']")
+                return _texture_faces(mesh, textured, uv, os.path.join(folder, _xml_value(child, "string", "filename", path)),
+                                      raw is not None and raw.get("value") == "true",
+                                      nearest is not None and nearest.get("value") == "nearest")
+            if child.tag in ("rgb", "float"):
+                return np.tile(_xml_floats(child, path, 3), (mesh.num_faces, 1))
+            raise InputError(f"{path}: {element.get('type')}.{name} is a <{child.tag} type={child.get('type')!r}>; "
+                             "only bitmap textures and rgb/float values are read")
+        return np.full((mesh.num_faces, 3), default)
+
+    def add(element, weight):
+        kind = element.get("type")
+        if kind == "twosided":
+            return add(child_bsdf(element), weight)
+        if kind == "blendbsdf":
+            w = float(_xml_value(element, "float", "weight", path))
+            children = [resolve(c) for c in element if c.tag in ("bsdf", "ref")]
+            if len(children) != 2 or not 0 <= w <= 1:
+                raise InputError(f"{path}: a blendbsdf needs two BSDFs and a constant weight in [0, 1]")
+            add(children[0], weight * (1.0 - w))
+            return add(children[1], weight * w)
+        if kind in DIFFUSE_PROPERTY:
+            parts["diffuse"] += weight * albedo(element, DIFFUSE_PROPERTY[kind], 0.5)
+        elif kind in MIRRORS:
+            parts["specular"] += weight * albedo(element, "specular_reflectance", 1.0)
+        else:
+            raise InputError(f"{path}: BSDF type {kind!r} is not read; use diffuse, plastic, roughplastic, principled, "
+                             "or a blendbsdf of those with a conductor")
+
+    add(bsdf, 1.0)
+    out = {**parts, "radiance_sh": None, "pseudo_sh": None}
+    for emitter in root.findall("emitter"):
+        if emitter.get("type") == "envmap":
+            radiance = _envmap_sh(os.path.join(folder, _xml_value(emitter, "string", "filename", path)), order)
+            scale = emitter.find("float[@name='scale']")
+            radiance = radiance * (float(scale.get("value")) if scale is not None else 1.0)
+            matrix = _xml_matrix(emitter, path)
+            if matrix is not None:
+                radiance = sh.rotation_matrix(order, matrix[:3, :3]) @ radiance
+            out["radiance_sh"] = radiance
+            break
+        if emitter.get("type") == "constant":
+            value = emitter.find("*[@name='radiance']")
+            out["radiance_sh"] = np.zeros((sh.num_coeffs(order), 3))
+            out["radiance_sh"][0] = 2.0 * np.sqrt(np.pi) * (_xml_floats(value, path, 3) if value is not None else 1.0)
+            break
+    return out
+
+
+def _xml_value(element, tag: str, name: str, path: str) -> str:
+    found = element.find(f"{tag}[@name='{name}']")
+    if found is None or found.get("value") is None:
+        raise InputError(f"{path}: <{element.tag} type={element.get('type')!r}> has no <{tag} name={name!r}>")
+    return found.get("value")
+
+
+def _xml_floats(element, path: str, count: int) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in element.get("value", "").replace(",", " ").split()])
+    except ValueError:
+        values = np.zeros(0)
+    if len(values) == 1:
+        values = np.repeat(values, count)
+    if len(values) != count or not np.all(np.isfinite(values)):
+        raise InputError(f"{path}: <{element.tag} name={element.get('name')!r}> must hold {count} finite numbers")
+    return values
+
+
+def _xml_matrix(element, path: str) -> np.ndarray | None:
+    """The 4x4 of a ``to_world`` transform given as one <matrix>, None when absent."""
+    transform = element.find("transform[@name='to_world']")
+    if transform is None:
+        return None
+    children = list(transform)
+    if len(children) != 1 or children[0].tag != "matrix":
+        raise InputError(f"{path}: only a to_world given as one <matrix> is read")
+    return _xml_floats(children[0], path, 16).reshape(4, 4)
 
 
 def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float = 10000.0,

@@ -40,11 +40,11 @@ def spherical_texture_average(mesh: TriangleMesh, texture: np.ndarray, samples_p
 
 
 def uv_texture_average(mesh: TriangleMesh, uv: np.ndarray, texture: np.ndarray,
-                       samples_per_edge: int = 4) -> np.ndarray:
+                       samples_per_edge: int = 4, nearest: bool = False) -> np.ndarray:
     """Area average over each face of an image texture through per-vertex UVs.
 
     u runs left to right, v bottom to top (OBJ/PLY convention), wrapping
-    (repeat); bilinear lookup between pixel centres.
+    (repeat); bilinear lookup between pixel centres (``nearest``: the texel's value).
 
     Parameters
     ----------
@@ -56,15 +56,20 @@ def uv_texture_average(mesh: TriangleMesh, uv: np.ndarray, texture: np.ndarray,
     """
     bary = _barycentric_grid(samples_per_edge)
     coords = np.einsum("sk,fkd->fsd", bary, uv[mesh.faces]).reshape(-1, 2)
-    return sample_uv(texture, coords).reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
+    return sample_uv(texture, coords, nearest).reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
 
 
-def sample_uv(texture: np.ndarray, coords: np.ndarray) -> np.ndarray:
+def sample_uv(texture: np.ndarray, coords: np.ndarray, nearest: bool = False) -> np.ndarray:
     """(N, C) bilinear lookup of ``texture`` (H, W, C) at texture coordinates (N, 2): u left
-    to right, v bottom to top (OBJ/PLY convention), wrapping; pixel centres at half-texels."""
+    to right, v bottom to top (OBJ/PLY convention), wrapping; pixel centres at half-texels.
+    ``nearest``: the value of the texel that holds the point (Mitsuba's ``filter_type``)."""
     h, w = texture.shape[:2]
     x = np.mod(coords[:, 0], 1.0) * w - 0.5
     y = (1.0 - np.mod(coords[:, 1], 1.0)) * h - 0.5
+    if nearest:
+        col = np.floor(x + 0.5).astype(np.int64) % w
+        row = np.clip(np.floor(y + 0.5).astype(np.int64), 0, h - 1)
+        return np.asarray(texture, dtype=np.float64)[row, col]
     x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
     x0, x1 = x0 % w, (x0 + 1) % w
