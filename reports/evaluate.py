@@ -91,6 +91,13 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
         s = metrics.lstsq_scale(est_albedo[mask], true_albedo[mask])
         de = metrics.ciede2000(est_albedo[mask] * s, true_albedo[mask]) if mask.any() else np.zeros(0)
         entry["psnr_lstsq"] = metrics.albedo_psnr(est_albedo, true_albedo, mask)
+        history = est.face_stats.get("albedo_history") if component == "diffuse" else None
+        seconds = (est.info.get("ad_history") or {}).get("snapshot_seconds")
+        if history is not None and seconds is not None and len(seconds) == history.shape[1]:
+            # an iterative method's albedo snapshots: its error against time (the peer comparison)
+            entry["psnr_history"] = {"seconds": [float(t) for t in seconds],
+                                     "psnr_lstsq": [metrics.albedo_psnr(history[:, k], true_albedo, mask)
+                                                    for k in range(history.shape[1])]}
         entry["ciede2000"] = {"mean": float(de.mean()) if de.size else None,
                               "median": float(np.median(de)) if de.size else None,
                               "p90": float(np.percentile(de, 90)) if de.size else None}

@@ -139,6 +139,30 @@ def compare_histograms(entries: list[tuple[str, np.ndarray]], component: str) ->
     return _png(fig)
 
 
+def error_against_time(runs: list[dict]) -> bytes:
+    """Diffuse albedo PSNR against estimate time: runs are dicts with method, seconds, psnr
+    and curve [(seconds, psnr), ...] (a line for a method that records its progress, a
+    point per run otherwise); log time axis."""
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    colours, labelled = {}, set()
+    for run in runs:
+        colour = colours.setdefault(run["method"], f"C{len(colours) % 10}")
+        label = None if run["method"] in labelled else run["method"]
+        labelled.add(run["method"])
+        if run["curve"]:
+            t, p = zip(*run["curve"])
+            ax.plot(t, p, color=colour, lw=1.2, alpha=0.8, label=label)
+            label = None
+        ax.plot([run["seconds"]], [run["psnr"]], "o", color=colour, ms=5, label=label)
+    ax.set_xscale("log")
+    ax.set_xlabel("estimate wall time (s)")
+    ax.set_ylabel("diffuse PSNR (dB, lstsq scale)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return _png(fig)
+
+
 def sweep_panels(axis: str, panels: list[tuple[str, dict]]) -> bytes:
     """One row of plots, a metric each: (metric label, label -> (x, mean, min, max)); a line
     per label with its min-max band. Non-numeric axis values are placed in order."""

@@ -147,13 +147,35 @@ def compare_row(metrics: dict, ratios: dict, folder: str) -> dict:
 
 
 def compare_figures(entries: list[tuple[dict, dict]]) -> list[tuple[str, bytes]]:
-    """Overlaid ratio histograms per (scene, component) over (metrics, ratios) pairs."""
+    """Overlaid ratio histograms per (scene, component) over (metrics, ratios) pairs, and per
+    scene the diffuse albedo error against estimate time (a point per run, a curve for a
+    method that records its albedo over time)."""
     hist: dict = {}
+    timing: dict = {}
     for metrics, ratios in entries:
         for comp, r in ratios.items():
             hist.setdefault((metrics.get("scene"), comp), []).append((metrics.get("method"), r[:, 3]))
-    return [(f"{scene}: {comp} albedo ratios", figures.compare_histograms(runs, comp))
-            for (scene, comp), runs in sorted(hist.items(), key=lambda kv: str(kv[0]))]
+        point = error_against_time(metrics)
+        if point is not None:
+            timing.setdefault(metrics.get("scene"), []).append(point)
+    out = [(f"{scene}: {comp} albedo ratios", figures.compare_histograms(runs, comp))
+           for (scene, comp), runs in sorted(hist.items(), key=lambda kv: str(kv[0]))]
+    out += [(f"{scene}: diffuse albedo PSNR against estimate time", figures.error_against_time(runs))
+            for scene, runs in sorted(timing.items(), key=lambda kv: str(kv[0]))]
+    return out
+
+
+def error_against_time(metrics: dict) -> dict | None:
+    """(method, seconds, PSNR, curve) of a report: the estimate's total time and diffuse
+    PSNR (least-squares scale), with the snapshots' (seconds, PSNR) when recorded; None
+    without a diffuse albedo or a time."""
+    psnr = lookup(metrics, "albedo.diffuse.psnr_lstsq")
+    seconds = lookup(metrics, "estimate_timings.total")
+    if psnr is None or seconds is None:
+        return None
+    history = lookup(metrics, "albedo.diffuse.psnr_history") or {}
+    curve = [(t, p) for t, p in zip(history.get("seconds", []), history.get("psnr_lstsq", [])) if p is not None]
+    return {"method": metrics.get("method"), "seconds": float(seconds), "psnr": float(psnr), "curve": curve}
 
 
 def text_table(rows: list[dict]) -> list[str]:

@@ -43,5 +43,12 @@ def test_mitsuba_ad_runs_within_its_budget_and_fits(tmp_path):
     np.testing.assert_allclose(est.pseudo_sh[0], 1.0)
     history = est.face_stats["albedo_history"]
     assert history.shape[0] == 80 and history.shape[2] == 3 and history.shape[1] >= 2
+    # the report scores every snapshot: the error-against-time curve of the comparison
+    from reports.evaluate import evaluate
+    truth = read_dataset(str(tmp_path / "micro"), load_test=False).ground_truth
+    diffuse = evaluate(data.mesh, truth, est).metrics["albedo"]["diffuse"]
+    curve = diffuse["psnr_history"]
+    assert len(curve["seconds"]) == len(curve["psnr_lstsq"]) == history.shape[1]
+    assert np.all(np.diff(curve["seconds"]) > 0) and all(np.isfinite(curve["psnr_lstsq"]))
     with pytest.raises(InputError, match="ad_time_budget"):
         EstimatorConfig(ad_time_budget=0.0)
