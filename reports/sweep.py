@@ -9,8 +9,11 @@ import os
 
 import numpy as np
 
+from estimator.errors import InputError
+
 from . import figures
 from .html import embed_png
+from .regression import TRACKED
 
 SWEEP_METRICS = [  # (label, key in a sweep row)
     ("diffuse ±10 % (lstsq)", "albedo.diffuse.lstsq.luminance.within_10"),
@@ -46,13 +49,70 @@ def axis_series(rows: list[dict], scene: str, axis: str, key: str) -> dict[str, 
     return out
 
 
-def write(folder: str, name: str, rows: list[dict]) -> None:
-    """sweep.json (the rows) and sweep.html (the plots and a table) into ``folder``."""
+def row_key(row: dict) -> str:
+    """The identity of a sweep row across versions: scene, method label, seed and axis values."""
+    return json.dumps([row["scene"], row["label"], row["seed"], row["axes"]], sort_keys=True, default=str)
+
+
+def regressions(rows: list[dict], baseline_rows: list[dict]) -> list[dict]:
+    """Each row's tracked metrics (:data:`reports.regression.TRACKED`, the ones a sweep row
+    holds) against the baseline sweep's row of the same :func:`row_key`: one entry per
+    (row, metric) with status 'ok', 'worse' (moved the bad way by more than the tolerance)
+    or 'missing' (the baseline has it, this sweep not); rows new to this sweep are skipped."""
+    base = {row_key(r): r for r in baseline_rows}
+    out = []
+    for row in rows:
+        old = base.get(row_key(row))
+        if old is None:
+            continue
+        for metric, (better, tol) in TRACKED.items():
+            was, now = old.get(metric), row.get(metric)
+            if not isinstance(was, (int, float)) or not np.isfinite(was):
+                continue
+            if not isinstance(now, (int, float)) or not np.isfinite(now):
+                status, now = "missing", None
+            else:
+                change = (now - was) if better == "higher" else (was - now)
+                status = "worse" if change < -tol else "ok"
+            out.append({"row": row_key(row), "metric": metric, "baseline": float(was),
+                        "current": None if now is None else float(now), "direction": better, "tolerance": tol,
+                        "status": status})
+    return out
+
+
+def read_rows(path: str) -> list[dict]:
+    """The rows of a sweep.json (a previous sweep: the baseline)."""
+    try:
+        with open(path) as f:
+            data = json.load(f)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a readable sweep.json ({exc})") from None
+    rows = data.get("rows") if isinstance(data, dict) else None
+    if not isinstance(rows, list) or not all(isinstance(r, dict) and {"scene", "label", "seed", "axes"} <= set(r)
+                                             for r in rows):
+        raise InputError(f"{path}: a sweep.json holds 'rows' with scene, label, seed and axes")
+    return rows
+
+
+def write(folder: str, name: str, rows: list[dict], verdict: list[dict] | None = None) -> None:
+    """sweep.json (the rows) and sweep.html (the plots and a table) into ``folder``; with
+    ``verdict`` (:func:`regressions`) also regression.json and a regression section."""
     os.makedirs(folder, exist_ok=True)
     _atomic_text(os.path.join(folder, "sweep.json"), json.dumps({"suite": name, "rows": rows}, indent=1, default=str))
     name = str(name)
     parts = [f"<html><head><meta charset='utf-8'><title>{html.escape(name)} sweep</title></head><body>",
              f"<h1>Sweep: {html.escape(name)}</h1>"]
+    if verdict is not None:
+        worse = [v for v in verdict if v["status"] != "ok"]
+        _atomic_text(os.path.join(folder, "regression.json"),
+                     json.dumps({"compared": len(verdict), "worse": len(worse), "rows": verdict}, indent=1))
+        parts.append(f"<h2>Regression against the baseline sweep: {len(verdict) - len(worse)} of {len(verdict)} "
+                     "tracked metrics within tolerance</h2>")
+        if worse:
+            parts.append("<table border='1'><tr><th>row</th><th>metric</th><th>baseline</th><th>now</th></tr>" + "".join(
+                f"<tr><td>{html.escape(v['row'])}</td><td>{html.escape(v['metric'])}</td><td>{v['baseline']:.4g}</td>"
+                f"<td>{'missing' if v['current'] is None else format(v['current'], '.4g')}</td></tr>" for v in worse)
+                + "</table>")
     for scene in dict.fromkeys(r["scene"] for r in rows):
         axes = list(dict.fromkeys(a for r in rows if r["scene"] == scene for a in r["axes"]))
         for axis in axes:

@@ -217,17 +217,29 @@ def cmd_suite(args) -> int:
     from harness.sweep.runner import run_sweep
     from harness.sweep.suite import load_suite
 
+    from reports.sweep import read_rows
+
     suite = load_suite(args.suite, args.profile)
+    baseline = read_rows(args.baseline) if args.baseline else None   # read before the sweep may replace it
     check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
     summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
-                        not args.no_mitsuba, args.variant, log=_err)
+                        not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline)
     print_table([{**r, "scene": f"{r['scene']} {json.dumps(r['axes']) if r['axes'] else ''}".strip(),
                   "method": r["label"]} for r in summary["rows"]])
     print(f"{summary['datasets']} datasets, {summary['runs']} runs: {summary['executed']} jobs run, "
           f"{summary['reused']} reused, {summary['seconds']:.1f} s\n"
           f"comparison: {os.path.abspath(os.path.join(args.output, 'compare', 'compare.html'))}\n"
           f"sweep plots: {os.path.abspath(os.path.join(args.output, 'compare', 'sweep.html'))}")
-    return 0
+    verdict = summary["regressions"]
+    if verdict is None:
+        return 0
+    worse = [v for v in verdict if v["status"] != "ok"]
+    for v in worse:
+        now = "missing" if v["current"] is None else f"{v['current']:.4g}"
+        _err(f"REGRESSION {v['row']} {v['metric']}: baseline {v['baseline']:.4g}, now {now} "
+             f"({v['direction']} is better, tolerance {v['tolerance']:g})")
+    print(f"baseline sweep: {len(verdict) - len(worse)} of {len(verdict)} tracked metrics within tolerance")
+    return 1 if worse else 0
 
 
 def cmd_demo(args) -> int:
@@ -566,6 +578,8 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--executor", choices=("local", "dask"), default="local")
     su.add_argument("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (--executor dask)")
     su.add_argument("--variant", choices=VARIANTS)
+    su.add_argument("--baseline", help="a previous sweep's compare/sweep.json: a regression verdict per row and "
+                                       "tracked metric (exit 1 when one is worse than its tolerance)")
     su.set_defaults(func=cmd_suite)
 
     tx = sub.add_parser("export-texture", help="an estimate as texture maps: UV atlas, PNG/EXR, OBJ+MTL, glTF")

@@ -72,10 +72,13 @@ def _execute(fn, jobs, what, executor, workers, scheduler, log) -> dict[str, dic
 
 
 def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int = 1, scheduler: str | None = None,
-              force: bool = False, mitsuba: bool = False, variant: str | None = None, log=print) -> dict:
+              force: bool = False, mitsuba: bool = False, variant: str | None = None, log=print,
+              baseline_rows: list[dict] | None = None) -> dict:
     """Run a loaded suite (:func:`harness.sweep.suite.load_suite`) into ``out_dir``.
 
-    Returns a summary: job counts (run and reused), seconds, the rows of sweep.json.
+    Returns a summary: job counts (run and reused), seconds, the rows of sweep.json, and
+    with ``baseline_rows`` (a previous sweep's) the regression verdict
+    (:func:`reports.sweep.regressions`).
     """
     t0 = time.perf_counter()
     threads = worker_threads(workers) if executor == "local" and workers > 1 else None
@@ -87,10 +90,12 @@ def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int =
              **done_r[r["id"]]["metrics"]} for r in runs]
     compare_dir = os.path.join(out_dir, "compare")
     compare_runs([os.path.join(r["folder"], "report") for r in runs], compare_dir, overwrite=True)
-    sweep_report.write(compare_dir, suite["name"], rows)
+    verdict = sweep_report.regressions(rows, baseline_rows) if baseline_rows is not None else None
+    sweep_report.write(compare_dir, suite["name"], rows, verdict)
     reused = sum(1 for r in list(done_d.values()) + list(done_r.values()) if r.get("reused"))
     summary = {"datasets": len(datasets), "runs": len(runs), "reused": reused,
-               "executed": len(datasets) + len(runs) - reused, "seconds": time.perf_counter() - t0, "rows": rows}
+               "executed": len(datasets) + len(runs) - reused, "seconds": time.perf_counter() - t0, "rows": rows,
+               "regressions": verdict}
     with open(os.path.join(out_dir, "sweep-summary.json"), "w") as f:
-        json.dump({k: v for k, v in summary.items() if k != "rows"}, f, indent=1)
+        json.dump({k: v for k, v in summary.items() if k not in ("rows", "regressions")}, f, indent=1)
     return summary

@@ -95,6 +95,24 @@ def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     os.remove(run_json.parent.parent / jobs.JOB_FILE)
     assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
     assert "1 jobs run, 5 reused" in capsys.readouterr().out
+    # a regression verdict against a previous sweep: the same code passes; a baseline that
+    # claims a better result than now (beyond the tolerance) fails, named per row and metric
+    baseline = tmp_path / "baseline.json"
+    baseline.write_text((out / "compare" / "sweep.json").read_text())
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--baseline", str(baseline)]) == 0
+    assert "baseline sweep: 16 of 16 tracked metrics within tolerance" in capsys.readouterr().out   # 4 rows x 4
+    verdict = json.load(open(out / "compare" / "regression.json"))
+    assert verdict["worse"] == 0 and verdict["compared"] >= 4
+    better = json.loads(baseline.read_text())
+    better["rows"][0]["albedo.diffuse.lstsq.luminance.within_10"] = 1.5
+    baseline.write_text(json.dumps(better))
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--baseline", str(baseline)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("REGRESSION") == 1 and "albedo.diffuse.lstsq.luminance.within_10" in err
+    assert "Regression against the baseline sweep" in (out / "compare" / "sweep.html").read_text()
+    baseline.write_text("{}")
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--baseline", str(baseline)]) == 2
+    assert "a sweep.json holds 'rows'" in capsys.readouterr().err
 
 
 def test_smoke_sweep_on_a_spawned_pool_and_on_dask(tmp_path, capsys):
