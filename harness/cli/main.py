@@ -141,14 +141,19 @@ def _report_exit(metrics: dict, regressions, out: str) -> int:
     cc = metrics.get("mitsuba_cross_check") or {}
     if cc.get("pass") is False:
         print(f"warning: the Mitsuba re-render differs from the forward model by more than {cc['tolerance']}")
-    if regressions is None:
-        return 0
-    worse = [r for r in regressions if r["status"] != "ok"]
+    return 0 if regressions is None else _regression_exit(regressions, "baseline")
+
+
+def _regression_exit(rows: list[dict], what: str) -> int:
+    """Print a REGRESSION line per worse metric (rows of :func:`reports.regression.check` or
+    :func:`reports.sweep.regressions`) and a summary; exit code 1 when any is worse."""
+    worse = [r for r in rows if r["status"] != "ok"]
     for r in worse:
         now = "missing or not a finite number" if r["current"] is None else f"{r['current']:.4g}"
-        _err(f"REGRESSION {r['metric']}: baseline {r['baseline']:.4g}, now {now} "
+        where = f"{r['row']} " if "row" in r else ""
+        _err(f"REGRESSION {where}{r['metric']}: baseline {r['baseline']:.4g}, now {now} "
              f"({r['direction']} is better, tolerance {r['tolerance']:g})")
-    print(f"baseline: {len(regressions) - len(worse)} of {len(regressions)} tracked metrics within tolerance")
+    print(f"{what}: {len(rows) - len(worse)} of {len(rows)} tracked metrics within tolerance")
     return 1 if worse else 0
 
 
@@ -231,15 +236,7 @@ def cmd_suite(args) -> int:
           f"comparison: {os.path.abspath(os.path.join(args.output, 'compare', 'compare.html'))}\n"
           f"sweep plots: {os.path.abspath(os.path.join(args.output, 'compare', 'sweep.html'))}")
     verdict = summary["regressions"]
-    if verdict is None:
-        return 0
-    worse = [v for v in verdict if v["status"] != "ok"]
-    for v in worse:
-        now = "missing" if v["current"] is None else f"{v['current']:.4g}"
-        _err(f"REGRESSION {v['row']} {v['metric']}: baseline {v['baseline']:.4g}, now {now} "
-             f"({v['direction']} is better, tolerance {v['tolerance']:g})")
-    print(f"baseline sweep: {len(verdict) - len(worse)} of {len(verdict)} tracked metrics within tolerance")
-    return 1 if worse else 0
+    return 0 if verdict is None else _regression_exit(verdict, "baseline sweep")
 
 
 def cmd_demo(args) -> int:
