@@ -224,6 +224,8 @@ def cmd_suite(args) -> int:
 
     from reports.sweep import read_rows
 
+    if args.scheduler and args.executor != "dask":
+        raise InputError("--scheduler names a Dask scheduler; it needs --executor dask")
     suite = load_suite(args.suite, args.profile)
     baseline = read_rows(args.baseline) if args.baseline else None   # read before the sweep may replace it
     check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
@@ -292,6 +294,11 @@ def cmd_estimate(args) -> int:
     elif "phong_exponent" in flags:
         flags["phong_exponent"] = _positive_float("--phong-exponent", flags["phong_exponent"])
     method, config = estimator_settings(ds.meta, args.method, flags)
+    if "ad_time_budget" in flags and method != "mitsuba-ad":
+        raise InputError(f"--time-budget applies to mitsuba-ad (the iterative peer), not to {method}")
+    if "robust_loss" in flags and method == "mitsuba-ad":
+        raise InputError("--robust-loss applies to the bilinear and retinex methods; mitsuba-ad fits the images "
+                         "by gradient descent on an L2 loss")
     known = {}
     if get_method(method).needs_illumination:
         source = os.path.abspath(args.truth or args.dataset)

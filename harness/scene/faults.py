@@ -128,8 +128,9 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
     train : the faulted (camera, image) pairs (poses and focal as written; images as seen).
     test : the test cameras as written.
     ldr : per view, the (H, W, 4) uint8 sRGB image to write as PNG, or None.
-    record : the fault parameters, the seed and what was drawn (per-view pose error,
-        patch boxes), for ``transforms.json``.
+    record : the fault parameters as applied, the seed and what was drawn (per-view pose
+        error, patch boxes), for ``transforms.json``; ``clamped`` lists a patch count that
+        asked for more views than there are (requested and applied).
     """
     rng = np.random.default_rng([seed, faults.seed, 0x5EED])
     record: dict = {"spec": dataclasses.asdict(faults), "seed": [seed, faults.seed]}
@@ -150,6 +151,9 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
     for kind, count, size, value in (("glare", faults.glare_views, faults.glare_size, faults.glare_value),
                                      ("occluder", faults.occluder_views, faults.occluder_size,
                                       faults.occluder_value)):
+        if count > len(out):   # more views asked for than there are: record what was applied
+            record["spec"][f"{kind}_views"] = len(out)
+            record.setdefault("clamped", {})[f"{kind}_views"] = {"requested": count, "applied": len(out)}
         for index in rng.choice(len(out), size=min(count, len(out)), replace=False):
             camera, image = out[index]
             image, box = add_patch(image, size, value, kind == "occluder", rng)

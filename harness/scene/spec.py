@@ -501,6 +501,7 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
         raw = apply_overrides(raw, profiles[profile])
     if overrides:
         raw = apply_overrides(raw, overrides)
+    _check_keys("spec", raw, SceneSpec)   # again: a profile or --set may name a key the spec lacks
     if not isinstance(raw.get("name"), str) or not raw["name"]:
         raise SpecError(f"spec.name must be a non-empty string, got {raw.get('name')!r}")
     mat = _table("material", raw.get("material", {}))

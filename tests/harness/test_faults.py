@@ -152,3 +152,12 @@ def test_generate_set_flag_adds_faults(tmp_path, capsys):
     assert record["spec"]["noise_read"] == 0.1 and record["spec"]["ldr"] is True
     assert main(["generate", MICRO, "-o", str(tmp_path / "bad"), "--set", "faults.noise_read"]) == 2
     assert "--set needs KEY=VALUE" in capsys.readouterr().err
+
+
+def test_more_patch_views_than_views_are_recorded_as_applied():
+    cam = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, 64, 64)
+    mesh = TriangleMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    spec = FaultSpec(glare_views=9, glare_size=8)
+    _, out, _, _, record = faults.apply_faults(spec, 0, mesh, [(cam, _flat()) for _ in range(3)], [cam])
+    assert record["spec"]["glare_views"] == 3 and record["clamped"] == {"glare_views": {"requested": 9, "applied": 3}}
+    assert sorted(p["view"] for p in record["patches"]) == [0, 1, 2]

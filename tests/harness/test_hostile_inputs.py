@@ -455,3 +455,13 @@ def test_report_with_ground_truth_holds_the_self_check_too(copy, tmp_path):
     assert main(["report", str(run), "-o", str(tmp_path / "rep"), "--no-mitsuba"]) == 0
     m = json.load(open(tmp_path / "rep" / "metrics.json"))
     assert "albedo" in m and m["self_check"]["residual"]["median_relative"] >= 0
+
+
+def test_flags_for_another_method_or_executor_are_refused(micro, tmp_path, capsys):
+    ds = micro[0]
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r1", "--method", "median-color", "--time-budget", "5"],
+                 "--time-budget applies to mitsuba-ad", inputs=[ds], absent=[tmp_path / "r1"])
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r2", "--method", "mitsuba-ad", "--robust-loss", "huber"],
+                 "--robust-loss applies to", inputs=[ds], absent=[tmp_path / "r2"])
+    expect_error(capsys, ["bench", "smoke", "-o", tmp_path / "s", "--scheduler", "tcp://127.0.0.1:1"],
+                 "it needs --executor dask", absent=[tmp_path / "s"])

@@ -96,3 +96,13 @@ def test_uv_textures_from_a_mesh_file(tmp_path):
     raw["geometry"] = {"type": "icosphere"}
     with pytest.raises(SpecError, match="mapping = 'uv'"):
         parse_spec(raw, str(tmp_path))
+
+
+def test_overrides_naming_an_unknown_top_level_key_are_refused(tmp_path):
+    raw = _base(tmp_path)
+    with pytest.raises(SpecError, match="spec.bogus"):
+        parse_spec(raw, str(tmp_path), overrides={"bogus": 3})
+    raw["profiles"] = {"p": {"bogus.x": 1}}
+    with pytest.raises(SpecError, match="spec.bogus"):
+        parse_spec(raw, str(tmp_path), profile="p")
+    assert parse_spec(_base(tmp_path), str(tmp_path), overrides={"cameras.width": 32}).cameras.width == 32
