@@ -97,6 +97,50 @@ def displace_vertices(mesh: TriangleMesh, sigma: float, rng: np.random.Generator
     return TriangleMesh(moved, f)
 
 
+def decimate(mesh: TriangleMesh, keep: float, steps: int = 24) -> TriangleMesh:
+    """The mesh simplified by vertex clustering to about ``keep`` x its faces: vertices in
+    one cell of a cubic grid merge into their mean, collapsed and repeated faces go. The
+    cell size is found by bisection on the face count (within 5 % of the target, or the
+    closest of ``steps`` tries)."""
+    v, f = mesh.vertices, mesh.faces
+    target = max(4, int(round(keep * len(f))))
+    extent = float(np.ptp(v, axis=0).max())
+
+    def cluster(cell: float) -> TriangleMesh:
+        keys = np.floor((v - v.min(axis=0)) / cell).astype(np.int64)
+        _, ids = np.unique(keys, axis=0, return_inverse=True)
+        ids = ids.ravel()
+        count = np.bincount(ids).astype(float)
+        centres = np.stack([np.bincount(ids, v[:, k]) for k in range(3)], 1) / count[:, None]
+        faces = ids[f]
+        ok = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+        faces = faces[ok]
+        _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+        faces = faces[np.sort(first)]
+        used, compact = np.unique(faces, return_inverse=True)
+        return TriangleMesh(centres[used], compact.reshape(-1, 3))
+
+    lo, hi = 1e-6 * extent, extent
+    best = mesh
+    for _ in range(steps):
+        cell = np.sqrt(lo * hi)
+        out = cluster(cell)
+        if abs(out.num_faces - target) < abs(best.num_faces - target):
+            best = out
+        if abs(out.num_faces - target) <= 0.05 * target:
+            break
+        lo, hi = (cell, hi) if out.num_faces > target else (lo, cell)
+    return best
+
+
+def nearest_faces(source: TriangleMesh, target: TriangleMesh) -> np.ndarray:
+    """(F_target,) index of the ``source`` face whose centroid is nearest to each ``target``
+    face's centroid (how ground truth follows a decimated mesh)."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(source.centroids).query(target.centroids)[1].astype(np.int64)
+
+
 def add_patch(image: np.ndarray, size: int, value: float, replace: bool, rng: np.random.Generator
               ) -> tuple[np.ndarray, list[int]]:
     """RGBA with a ``size`` x ``size`` square centred on a random covered pixel (the image
@@ -124,7 +168,8 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
 
     Returns
     -------
-    mesh : the mesh to write (vertex noise), same faces.
+    mesh : the mesh to write (vertex noise: same faces; decimation: fewer faces, and
+        ``record['face_source']`` (F',) gives the rendered face each written face stands for).
     train : the faulted (camera, image) pairs (poses and focal as written; images as seen).
     test : the test cameras as written.
     ldr : per view, the (H, W, 4) uint8 sRGB image to write as PNG, or None.
@@ -137,6 +182,10 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
     centre = mesh.vertices.mean(axis=0)
     if faults.vertex_noise > 0:
         mesh = displace_vertices(mesh, faults.vertex_noise, rng)
+    if faults.decimate > 0:
+        rendered, mesh = mesh, decimate(mesh, faults.decimate)
+        record["decimated"] = {"faces_rendered": rendered.num_faces, "faces_written": mesh.num_faces}
+        record["face_source"] = nearest_faces(rendered, mesh)
     out, pose_errors = [], []
     for camera, image in train:
         if faults.noise_read > 0 or faults.noise_shot > 0:
@@ -179,8 +228,9 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
 
 def corrupt_dataset(source: str, out_dir: str, faults: FaultSpec, seed: int = 0, overwrite: bool = False) -> dict:
     """Write a copy of the dataset at ``source`` with ``faults`` applied to its training
-    views (and mesh), atomically; ``ground_truth/`` is copied unchanged, and the fault
-    record is added to ``transforms.json``. Returns that record.
+    views (and mesh), atomically; ``ground_truth/`` is copied (per-face arrays carried to
+    the faces of a decimated mesh), and the fault record is added to ``transforms.json``.
+    Returns that record.
 
     The images are the dataset's own (alpha 1 where a frame has none), so a sweep of
     fault levels renders once.
@@ -198,9 +248,17 @@ def corrupt_dataset(source: str, out_dir: str, faults: FaultSpec, seed: int = 0,
         mesh, views, test_cams, ldr, record = apply_faults(faults, seed, ds.data.mesh, train,
                                                            [c for c, _ in test])
         record["source"] = os.path.abspath(source)
+        face_source = record.pop("face_source", None)
         write_dataset(tmp, mesh, views, list(zip(test_cams, [img for _, img in test])), {**meta, "faults": record},
                       ldr=ldr)
         truth = os.path.join(source, "ground_truth")
         if os.path.isdir(truth):
             shutil.copytree(truth, os.path.join(tmp, "ground_truth"))
+            materials = os.path.join(tmp, "ground_truth", "materials.npz")
+            if face_source is not None and os.path.isfile(materials):
+                # a decimated mesh: each written face carries the truth of the face it stands for
+                with np.load(materials) as old:
+                    arrays = {k: old[k][face_source] if old[k].shape[:1] == (ds.data.mesh.num_faces,) else old[k]
+                              for k in old.files}
+                np.savez(materials, **arrays)
     return record

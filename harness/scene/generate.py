@@ -179,8 +179,12 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         if spec.faults.active:
             mesh, views, test_cams, ldr, meta["faults"] = apply_faults(spec.faults, spec.seed, mesh, views, test_cams)
             say(f"faults applied to the {len(views)} training views: {spec.faults.summary()}")
+        source = meta.get("faults", {}).pop("face_source", None)
         write_dataset(tmp, mesh, views, list(zip(test_cams, test)), meta, half=spec.render.half, ldr=ldr)
         truth = scene.ground_truth()
+        if source is not None:   # a decimated mesh: each written face carries its rendered face's truth
+            truth = dataclasses.replace(truth, diffuse=truth.diffuse[source], specular=truth.specular[source],
+                                        regions=None if truth.regions is None else truth.regions[source])
         write_ground_truth(tmp, truth, envmap=scene.illumination.envmap,
                            extra={"scene_spec": spec_json(spec),
                                   "region_names": [r.name for r in spec.material.regions] or None})

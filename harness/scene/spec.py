@@ -309,6 +309,9 @@ class FaultSpec:
     focal_error : relative error of the written focal length (every view: intrinsics are shared).
     vertex_noise : vertices move along their normals by this standard deviation, as a
         fraction of the mean edge length (the written mesh; faces keep their identity).
+    decimate : the written mesh keeps about this fraction of the faces (vertex clustering;
+        0: off). Faces then change identity: the ground truth is carried to each written
+        face from the rendered face nearest to its centroid.
     glare_views, glare_size, glare_value : that many training views get a square patch of
         ``glare_size`` pixels where ``glare_value`` (absolute, linear) is added, centred on
         a random object pixel.
@@ -324,6 +327,7 @@ class FaultSpec:
     pose_translation: float = 0.0
     focal_error: float = 0.0
     vertex_noise: float = 0.0
+    decimate: float = 0.0
     glare_views: int = 0
     glare_size: int = 32
     glare_value: float = 0.5
@@ -338,6 +342,7 @@ class FaultSpec:
             _num(f"faults.{key}", getattr(self, key), 0, top)
         _num("faults.pose_rotation", self.pose_rotation, 0, 45)
         _num("faults.focal_error", self.focal_error, -0.5, 0.5)
+        _num("faults.decimate", self.decimate, 0, 0.99)
         for key in ("glare_views", "occluder_views", "seed"):
             _num(f"faults.{key}", getattr(self, key), 0, 2 ** 31 - 1, integer=True)
         for key in ("glare_size", "occluder_size"):
@@ -355,7 +360,7 @@ class FaultSpec:
     def summary(self) -> str:
         """The faults that are on, as 'key value' pairs ('' when none is)."""
         on = {"noise_read", "noise_shot", "clip", "ldr", "pose_rotation", "pose_translation", "focal_error",
-              "vertex_noise"}
+              "vertex_noise", "decimate"}
         parts = [f"{k} {getattr(self, k)}" for k in sorted(on) if getattr(self, k)]
         for kind in ("glare", "occluder"):
             if getattr(self, f"{kind}_views"):

@@ -161,3 +161,28 @@ def test_more_patch_views_than_views_are_recorded_as_applied():
     _, out, _, _, record = faults.apply_faults(spec, 0, mesh, [(cam, _flat()) for _ in range(3)], [cam])
     assert record["spec"]["glare_views"] == 3 and record["clamped"] == {"glare_views": {"requested": 9, "applied": 3}}
     assert sorted(p["view"] for p in record["patches"]) == [0, 1, 2]
+
+
+def test_decimation_keeps_about_the_asked_share_and_carries_the_truth(micro_pair, tmp_path):
+    from harness.scene.geometry import icosphere
+
+    sphere = icosphere(4)
+    half = faults.decimate(sphere, 0.5)
+    assert abs(half.num_faces - 0.5 * sphere.num_faces) <= 0.05 * 0.5 * sphere.num_faces
+    assert np.all(np.abs(np.linalg.norm(half.vertices, axis=1) - 1.0) < 0.05)   # still the sphere's surface
+    source = faults.nearest_faces(sphere, half)
+    assert source.shape == (half.num_faces,) and source.max() < sphere.num_faces
+    # a decimated copy of a dataset: mesh and ground truth agree face for face
+    clean = micro_pair[0]
+    record = faults.corrupt_dataset(clean, str(tmp_path / "d"), FaultSpec(decimate=0.5), seed=1)
+    ds = read_dataset(str(tmp_path / "d"))
+    assert record["decimated"]["faces_written"] == ds.data.mesh.num_faces < record["decimated"]["faces_rendered"]
+    assert ds.ground_truth.diffuse.shape == (ds.data.mesh.num_faces, 3)
+    assert "face_source" not in json.load(open(tmp_path / "d" / "transforms.json"))["faults"]
+
+
+def test_generate_writes_a_decimated_mesh_with_its_truth(tmp_path):
+    generate(load_spec(MICRO, overrides={"faults.decimate": 0.5}), str(tmp_path / "d"))
+    ds = read_dataset(str(tmp_path / "d"))
+    assert ds.data.mesh.num_faces < 80 and ds.ground_truth.diffuse.shape == (ds.data.mesh.num_faces, 3)
+    np.testing.assert_allclose(ds.ground_truth.diffuse, [[0.5, 0.4, 0.3]] * ds.data.mesh.num_faces)
