@@ -171,6 +171,9 @@ def to_latlong(coeffs: np.ndarray, height: int, width: int) -> np.ndarray:
     return (basis(order, dirs) @ coeffs).reshape(height, width, -1)
 
 
+LARGE_EXPONENT = 1e5  # above it phong_filter uses its asymptotic form (the two agree within 3e-9 there)
+
+
 def phong_filter(order: int, exponent: float) -> np.ndarray:
     """Per-degree filter of the normalised Phong lobe (n + 1)/(2 pi) max(0, r.w)^n.
 
@@ -185,9 +188,13 @@ def phong_filter(order: int, exponent: float) -> np.ndarray:
     (L + 1,) float64, one value per degree; value 1 at l = 0.
     """
     n = float(exponent)
-    if not n > -1.0:
-        raise InputError(f"Phong exponent must be > -1, got {exponent}")
+    if not n > -1.0 or not np.isfinite(n):
+        raise InputError(f"Phong exponent must be finite and > -1, got {exponent}")
     l = np.arange(order + 1, dtype=np.float64)
+    if n > LARGE_EXPONENT:
+        # the log-gamma differences lose their digits; the lobe is then nearly a delta and
+        # Lambda_l = E[P_l(x)] under (n + 1) x^n = 1 - l(l+1)/(2(n+2)) + O(n^-2)
+        return np.exp(-l * (l + 1) / (2.0 * (n + 2.0)))
     a = 1.0 + 0.5 * (n - l)
     log_common = 0.5 * np.log(np.pi) - (n + 1) * np.log(2.0) + special.gammaln(n + 1) - special.gammaln(0.5 * (n + l + 3))
     positive = a > 0

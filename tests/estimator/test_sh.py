@@ -101,3 +101,14 @@ def test_latlong_projection_against_monte_carlo_and_back():
     values = latlong.sample_bilinear(image, w)
     mc = 4 * np.pi * (sh.basis(3, w)[:, :, None] * values[:, None, :]).mean(axis=0)
     np.testing.assert_allclose(mc, coeffs, atol=0.05 * np.abs(coeffs).max())
+
+
+def test_phong_filter_of_huge_exponents_tends_to_one_from_below():
+    from estimator.sh import LARGE_EXPONENT, phong_filter
+
+    l = np.arange(11.0)
+    closed = phong_filter(10, LARGE_EXPONENT)                      # the closed form, at the switch
+    np.testing.assert_allclose(closed, np.exp(-l * (l + 1) / (2 * (LARGE_EXPONENT + 2))), atol=1e-8)
+    for n in (1e6, 1e12, 1e300):
+        f = phong_filter(10, n)
+        assert np.all(np.isfinite(f)) and np.all(f <= 1.0) and np.all(np.diff(f) <= 0) and f[0] == 1.0
