@@ -100,6 +100,9 @@ class EstimatorConfig:
         scaled down until subtracting it turns at most ``coat_max_negative`` more of the
         observations non-positive (a coat cannot reflect more than a pixel shows; without
         that cap one city case lost 22 % of its faces and fell to 12 dB).
+    interreflection : ``retinex-segmented`` adds to each face's shading the light the object
+        reflects onto it (one bounce, from the observed radiance of the faces its blocked
+        directions hit; :mod:`estimator.indirect`); the light's scale becomes an unknown.
     ad_time_budget, ad_resolution, ad_spp, ad_learning_rate, ad_envmap_height : the
         ``mitsuba-ad`` peer: wall-clock seconds of Adam steps, the rendered width it aims at
         (the views are box-averaged by an integer factor), samples per pixel, Adam's
@@ -144,6 +147,7 @@ class EstimatorConfig:
     retinex_iterations: int = 30
     retinex_min_uniform_share: float = 0.5
     coat_correction: bool = True
+    interreflection: bool = False
     coat_ior: float = 1.5
     coat_order: int = 4
     coat_min_share: float = 0.005

@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import coat, retinex, robust, sh, trust
+from . import coat, indirect, retinex, robust, sh, trust
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
@@ -544,8 +544,12 @@ class RetinexSegmented(Method):
             raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
         edges = mesh.face_adjacency
         fit = dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations)
+        if c.interreflection:
+            fit["indirect"] = indirect.indirect_shading(prep.caster, prep.sampling, prep.visibility,
+                                                        np.where(usable[:, None], radiance, 0.0))
+        extra = fit.get("indirect", 0.0)
         light, _ = retinex.log_shading_fit(radiance, prep.c_matrix, edges, usable, **fit)
-        albedo, lit = self._divide(prep, radiance, light, usable)
+        albedo, lit = self._divide(prep, radiance, light, usable, extra)
         labels, _ = segment(np.where(lit[:, None], albedo, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
         share = float(np.mean(labels[lit] >= 0))
         regions = int(labels.max()) + 1
@@ -554,13 +558,15 @@ class RetinexSegmented(Method):
             for _ in range(2):  # the regions' fit; then faces near a region in albedo join it, and again
                 light, region_albedo = retinex.log_shading_fit(radiance, prep.c_matrix, edges, usable, labels,
                                                                initial=light, **fit)
-                albedo, lit = self._divide(prep, radiance, light, usable)
+                albedo, lit = self._divide(prep, radiance, light, usable, extra)
                 joined = BilinearSegmented._assign(labels, albedo, lit, edges, 2.5 * c.segment_threshold)
                 labels = np.where(lit & (joined < regions), joined, -1)
             tied = lit & (labels >= 0)
             albedo[tied] = region_albedo[labels[tied]]
         else:
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
+        dc = light[0].copy()
+        light, albedo = light / dc, albedo * dc          # the unit-DC gauge (the indirect term fixed a scale)
         group = labels.copy()
         free = np.nonzero(group < 0)[0]
         group[free] = regions + np.arange(len(free))
@@ -582,10 +588,10 @@ class RetinexSegmented(Method):
                         self.model.pseudo_from_light(light), labels_out, observed, self.name, c, info,
                         light if self.model.light == "radiance" else None)
 
-    def _divide(self, prep, radiance, light, usable) -> tuple[np.ndarray, np.ndarray]:
-        """(F, 3) radiance over the shading of ``light``, and (F,) where that is an albedo:
-        usable and lit above 2 % of the 95th-percentile shading."""
-        shade = prep.c_matrix @ light
+    def _divide(self, prep, radiance, light, usable, extra=0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(F, 3) radiance over the shading of ``light`` (plus an ``extra`` indirect shading),
+        and (F,) where that is an albedo: usable and lit above 2 % of the 95th-percentile shading."""
+        shade = prep.c_matrix @ light + extra
         lum = shade.mean(axis=1)
         level = max(float(np.percentile(lum[usable], 95)), 1e-30)
         lit = usable & np.all(shade > 0, axis=1) & (lum > 0.02 * level)

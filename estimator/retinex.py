@@ -35,7 +35,7 @@ def _degrees(m: int) -> np.ndarray:
 def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,
                     labels: np.ndarray | None = None, initial: np.ndarray | None = None,
                     loss: str = "cauchy", ridge: float = 1e-9, iterations: int = 30,
-                    chunk: int = 100_000) -> tuple[np.ndarray, np.ndarray]:
+                    chunk: int = 100_000, indirect: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Light and region albedos that explain the log radiance ratios of neighbouring faces.
 
     Parameters
@@ -50,10 +50,13 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     ridge : weight of the (l (l + 1))^2 penalty on the light's coefficients, per row.
     iterations : Gauss-Newton steps per channel (stops earlier when the step is tiny).
     chunk : rows per block of the normal equations.
+    indirect : (F, 3) shading added to C L (light the object reflects onto itself,
+        :mod:`estimator.indirect`); it fixes the light's scale, so the DC is fitted too.
 
     Returns
     -------
-    light : (M, 3) light with unit DC per channel (the scale is a gauge).
+    light : (M, 3) light with unit DC per channel (the scale is a gauge), or at its own
+        scale with ``indirect``.
     region_albedo : (R, 3) albedo of each region (R = labels.max() + 1; (0, 3) without labels).
     """
     f, m = c_matrix.shape
@@ -75,34 +78,44 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     light = np.zeros((m, 3)) if initial is None else np.array(initial[:m], dtype=float)
     if initial is None:
         light[0] = 1.0
-    light /= np.where(np.abs(light[0]) > 0, light[0], 1.0)
+    if indirect is None:
+        light /= np.where(np.abs(light[0]) > 0, light[0], 1.0)
     penalty = ridge * (len(i) + len(member)) * (_degrees(m)[1:] * (_degrees(m)[1:] + 1)) ** 2
     albedo = np.zeros((regions, 3))
     with np.errstate(divide="ignore"):
         log_radiance = np.log(np.where(usable[:, None], radiance, 1.0))
     for c in range(3):
         light[:, c], albedo[:, c] = _fit_channel(log_radiance[:, c], c_matrix, i, j, member, group, regions,
-                                                 light[:, c], usable, loss, penalty, iterations, chunk)
+                                                 light[:, c], usable, loss, penalty, iterations, chunk,
+                                                 None if indirect is None else indirect[:, c])
     return light, np.exp(albedo)
 
 
-def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, loss, penalty, iterations, chunk):
-    shade = c_matrix @ light
+def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, loss, penalty, iterations, chunk,
+                 extra=None):
+    """One channel's Gauss-Newton fit. Unknowns: the light's coefficients from ``first`` on
+    (1: the DC is the gauge; 0 with an additive ``extra`` shading, which fixes the scale)
+    and the regions' log albedos."""
+    first = 1 if extra is None else 0
+    extra = np.zeros(len(ell)) if extra is None else extra
+    penalty = np.concatenate([[0.0], penalty]) if first == 0 else penalty
+    shade = c_matrix @ light + extra
     if np.any(shade[usable] <= 0):
         light = np.zeros_like(light)
         light[0] = 1.0
-        shade = c_matrix @ light
+        shade = c_matrix @ light + extra
     log_shade = np.log(np.maximum(shade, 1e-300))
     alpha = (group_quantile(group, (ell - log_shade)[member][:, None], regions, 0.5, interpolate=True)[:, 0]
              if regions else np.zeros(0))
-    n = len(light) - 1 + regions
+    k = len(light) - first
+    n = k + regions
     for _ in range(iterations):
         residual = _residuals(ell, log_shade, i, j, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
         normal, gradient = np.zeros((n, n)), np.zeros(n)
-        normal[: len(light) - 1, : len(light) - 1] += np.diag(penalty)
-        gradient[: len(light) - 1] += penalty * light[1:]
-        for rows, jac in _jacobian_blocks(c_matrix, shade, i, j, member, group, regions, chunk):
+        normal[:k, :k] += np.diag(penalty)
+        gradient[:k] += penalty * light[first:]
+        for rows, jac in _jacobian_blocks(c_matrix[:, first:], shade, i, j, member, group, regions, chunk):
             wj = jac * weights[rows, None]
             normal += wj.T @ jac
             gradient += wj.T @ residual[rows]
@@ -110,8 +123,8 @@ def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, los
         t = 1.0
         while t > 1e-4:
             trial = light.copy()
-            trial[1:] += t * step[: len(light) - 1]
-            trial_shade = c_matrix @ trial
+            trial[first:] += t * step[:k]
+            trial_shade = c_matrix @ trial + extra
             if np.all(trial_shade[usable] > 0):
                 break
             t *= 0.5
@@ -119,7 +132,7 @@ def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, los
             break  # no positive step: keep the light
         light, shade = trial, trial_shade
         log_shade = np.log(np.maximum(shade, 1e-300))
-        alpha = alpha + t * step[len(light) - 1:]
+        alpha = alpha + t * step[k:]
         if np.linalg.norm(t * step) < 1e-7 * max(1.0, float(np.linalg.norm(light))):
             break
     return light, alpha
@@ -132,18 +145,19 @@ def _residuals(ell, log_shade, i, j, member, group, alpha) -> np.ndarray:
     return np.concatenate([edge, region])
 
 
-def _jacobian_blocks(c_matrix, shade, i, j, member, group, regions, chunk):
-    """Yield (row indices, dense Jacobian block) of :func:`_residuals` with respect to
-    (L[1:], alpha), ``chunk`` rows at a time."""
-    m = c_matrix.shape[1]
+def _jacobian_blocks(columns, shade, i, j, member, group, regions, chunk):
+    """Yield (row indices, dense Jacobian block) of :func:`_residuals` with respect to the
+    light coefficients whose diffuse rows are ``columns`` (F, k) and the regions' log
+    albedos, ``chunk`` rows at a time."""
+    k = columns.shape[1]
     for start in range(0, len(i), chunk):
         a, b = i[start: start + chunk], j[start: start + chunk]
-        jac = np.zeros((len(a), m - 1 + regions))
-        jac[:, : m - 1] = -(c_matrix[a, 1:] / shade[a, None] - c_matrix[b, 1:] / shade[b, None])
+        jac = np.zeros((len(a), k + regions))
+        jac[:, :k] = -(columns[a] / shade[a, None] - columns[b] / shade[b, None])
         yield np.arange(start, start + len(a)), jac
     for start in range(0, len(member), chunk):
         f, g = member[start: start + chunk], group[start: start + chunk]
-        jac = np.zeros((len(f), m - 1 + regions))
-        jac[:, : m - 1] = -c_matrix[f, 1:] / shade[f, None]
-        jac[np.arange(len(f)), m - 1 + g] = -1.0
+        jac = np.zeros((len(f), k + regions))
+        jac[:, :k] = -columns[f] / shade[f, None]
+        jac[np.arange(len(f)), k + g] = -1.0
         yield len(i) + np.arange(start, start + len(f)), jac

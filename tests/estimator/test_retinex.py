@@ -72,3 +72,13 @@ def test_bad_inputs_are_named(change, match):
             "labels": None}
     with pytest.raises(InputError, match=match):
         log_shading_fit(**change(args))
+
+
+def test_an_additive_indirect_shading_fixes_the_scale():
+    """With a known indirect term the shading is C L + I: the light's DC is no longer a
+    gauge, and the fit recovers the light itself."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    extra = 0.3 + 0.2 * np.sin(np.arange(len(radiance)))[:, None] * np.ones(3)
+    radiance = albedo * (c_matrix @ light + extra)
+    fit, _ = log_shading_fit(radiance, c_matrix, edges, np.ones(len(radiance), bool), indirect=extra)
+    np.testing.assert_allclose(fit, light, rtol=1e-3, atol=1e-4)

@@ -1,0 +1,33 @@
+"""One-bounce indirect shading from observed radiance: inside a closed sphere every
+direction above a face sees the sphere again."""
+import numpy as np
+
+from estimator.data import TriangleMesh
+from estimator.indirect import indirect_shading
+from estimator.raycast import RayCaster
+from estimator.visibility import compute_visibility, sphere_sampling
+from harness.scene.geometry import icosphere
+
+
+def test_inside_a_uniform_sphere_the_indirect_shading_is_the_radiance():
+    sphere = icosphere(3)
+    inside = TriangleMesh(sphere.vertices, sphere.faces[:, ::-1])      # normals point inwards
+    caster = RayCaster(inside)
+    sampling = sphere_sampling(600)
+    visibility = compute_visibility(caster, sampling)
+    assert visibility.unpack(slice(0, 10)).mean() < 0.6                # the upper hemisphere is all blocked
+    radiance = np.tile([0.2, 0.5, 1.0], (inside.num_faces, 1))
+    shading = indirect_shading(caster, sampling, visibility, radiance)
+    # (1/pi) int_hemisphere cos dw = 1: the shading is the surrounding radiance (quadrature error ~2 %)
+    np.testing.assert_allclose(shading, radiance, rtol=0.04)
+    # a dark half contributes nothing: faces see about half of it
+    half = radiance * (inside.centroids[:, 1:2] > 0)
+    assert 0.25 < indirect_shading(caster, sampling, visibility, half)[:, 2].mean() < 0.75
+
+
+def test_a_convex_object_receives_no_indirect_light():
+    mesh = icosphere(2)
+    caster = RayCaster(mesh)
+    sampling = sphere_sampling(300)
+    shading = indirect_shading(caster, sampling, compute_visibility(caster, sampling), np.ones((mesh.num_faces, 3)))
+    assert np.abs(shading).max() < 1e-3
