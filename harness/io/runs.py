@@ -159,6 +159,12 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
             raise RunError(f"{npz}: {key} must be ((L+1)^2, 3), got {data[key].shape}")
     if "radiance_sh" in data and data["radiance_sh"].shape != data[pseudo_key].shape:
         raise RunError(f"{npz}: radiance_sh and {pseudo_key} differ in shape")
+    history = run.get("ad_history")
+    if history is not None:
+        seconds = history.get("snapshot_seconds", []) if isinstance(history, dict) else None
+        if not isinstance(seconds, list) or not all(isinstance(t, (int, float)) and not isinstance(t, bool)
+                                                    and np.isfinite(t) for t in seconds):
+            raise RunError(f"{js}: ad_history.snapshot_seconds must be a list of finite numbers")
     known = {field.name for field in dataclasses.fields(EstimatorConfig)}
     try:
         config = EstimatorConfig(**{k: v for k, v in run["parameters"].items() if k in known})
@@ -168,7 +174,7 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
         raise RunError(f"{npz}: {pseudo_key} has {data[pseudo_key].shape[0]} coefficients, run.json's sh_order "
                        f"{config.sh_order} needs {(config.sh_order + 1) ** 2}")
     est = Estimate(data["diffuse"], data["specular"], data[pseudo_key], data["labels"], data["observed"].astype(bool),
-                   run["method"], config, {k: run[k] for k in ("timings", "trust", "warnings") if k in run},
+                   run["method"], config, {k: run[k] for k in ("timings", "trust", "warnings", "ad_history") if k in run},
                    data.get("radiance_sh"), _face_stats(npz, data, f))
     if est.model.light == "radiance" and est.radiance_sh is None:
         raise RunError(f"{npz}: key 'radiance_sh' missing (the {est.model.name!r} model solves for the radiance)")

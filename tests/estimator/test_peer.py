@@ -50,5 +50,10 @@ def test_mitsuba_ad_runs_within_its_budget_and_fits(tmp_path):
     curve = diffuse["psnr_history"]
     assert len(curve["seconds"]) == len(curve["psnr_lstsq"]) == history.shape[1]
     assert np.all(np.diff(curve["seconds"]) > 0) and all(np.isfinite(curve["psnr_lstsq"]))
+    # and from the written run, as report and compare read it
+    from harness.io.runs import read_run, write_run
+    write_run(str(tmp_path / "run"), est, str(tmp_path / "micro"))
+    again, _ = read_run(str(tmp_path / "run"))
+    assert evaluate(data.mesh, truth, again).metrics["albedo"]["diffuse"]["psnr_history"] == curve
     with pytest.raises(InputError, match="ad_time_budget"):
         EstimatorConfig(ad_time_budget=0.0)
