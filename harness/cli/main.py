@@ -31,7 +31,12 @@ class Terminated(BaseException):
     """SIGTERM arrived: unwind like Ctrl-C, so atomic outputs are cleaned up."""
 
 
+_SIGTERM_SEEN = [False]   # set by the handler: Mitsuba's parser turns a Terminated raised inside a
+                          # Python plugin's constructor into a RuntimeError with no cause to follow
+
+
 def _on_sigterm(signum, frame):
+    _SIGTERM_SEEN[0] = True
     raise Terminated()
 
 
@@ -632,20 +637,21 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a bad flag (2, one line already printed)
         return int(exc.code or 0)
+    _SIGTERM_SEEN[0] = False
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)
-    except InputError as exc:
-        print(f"pseudolight: error: {exc}", file=sys.stderr)
-        return 2
     except BaseException as exc:
-        kind = _interruption(exc)
+        kind = Terminated if _SIGTERM_SEEN[0] else _interruption(exc)
         if kind is Terminated:
             print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
             return 143
         if kind is KeyboardInterrupt:
             print("pseudolight: interrupted; no partial output was left", file=sys.stderr)
             return 130
+        if isinstance(exc, InputError):
+            print(f"pseudolight: error: {exc}", file=sys.stderr)
+            return 2
         raise
     finally:
         signal.signal(signal.SIGTERM, previous)
