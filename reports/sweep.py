@@ -13,7 +13,7 @@ from estimator.errors import InputError
 
 from . import figures
 from .html import embed_png
-from .regression import TRACKED
+from .regression import TRACKED, check
 
 SWEEP_METRICS = [  # (label, key in a sweep row)
     ("diffuse ±10 % (lstsq)", "albedo.diffuse.lstsq.luminance.within_10"),
@@ -56,27 +56,30 @@ def row_key(row: dict) -> str:
 
 def regressions(rows: list[dict], baseline_rows: list[dict]) -> list[dict]:
     """Each row's tracked metrics (:data:`reports.regression.TRACKED`, the ones a sweep row
-    holds) against the baseline sweep's row of the same :func:`row_key`: one entry per
-    (row, metric) with status 'ok', 'worse' (moved the bad way by more than the tolerance)
-    or 'missing' (the baseline has it, this sweep not); rows new to this sweep are skipped."""
+    holds) against the baseline sweep's row of the same :func:`row_key`, by
+    :func:`reports.regression.check`: one entry per (row, metric) with status 'ok', 'worse'
+    or 'missing', and the row's key; rows new to this sweep are skipped."""
     base = {row_key(r): r for r in baseline_rows}
     out = []
     for row in rows:
         old = base.get(row_key(row))
         if old is None:
             continue
-        for metric, (better, tol) in TRACKED.items():
-            was, now = old.get(metric), row.get(metric)
-            if not isinstance(was, (int, float)) or not np.isfinite(was):
-                continue
-            if not isinstance(now, (int, float)) or not np.isfinite(now):
-                status, now = "missing", None
-            else:
-                change = (now - was) if better == "higher" else (was - now)
-                status = "worse" if change < -tol else "ok"
-            out.append({"row": row_key(row), "metric": metric, "baseline": float(was),
-                        "current": None if now is None else float(now), "direction": better, "tolerance": tol,
-                        "status": status})
+        kept = {m: float(old[m]) for m in TRACKED if isinstance(old.get(m), (int, float))
+                and not isinstance(old[m], bool) and np.isfinite(old[m])}
+        out += [{"row": row_key(row), **r} for r in check(_nested(row), {"metrics": kept})]
+    return out
+
+
+def _nested(row: dict) -> dict:
+    """A sweep row (flat dotted metric keys) as the nested dict that reports hold."""
+    out: dict = {}
+    for key, value in row.items():
+        *parents, leaf = key.split(".")
+        node = out
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
     return out
 
 

@@ -29,6 +29,7 @@ from harness.io.dataset import Dataset
 from harness.io.exr import write_exr
 from harness.io.jsonio import load_json
 from harness.io.mesh import write_uv_ply
+from harness.scene.illumination import Illumination
 from harness.scene.render import bsdf_dict, face_atlas
 from harness.scene.xml import NUMPY_TRANSFORMS, scene_xml
 
@@ -36,26 +37,16 @@ STOCK_MATERIALS = ("diffuse", "plastic", "roughplastic")
 
 
 def _emitters(illumination: dict) -> dict:
-    """Emitter dicts of a ground-truth ``illumination`` record (illumination.json)."""
+    """Emitter dicts of a ground-truth ``illumination`` record (illumination.json): the
+    generator's own (:meth:`Illumination.mitsuba_emitters`), with the envmap by file name."""
     kind = illumination["kind"]
-    if kind == "directional":
-        return {f"light_{k:03d}": {"type": "directional", "direction": (-np.asarray(l["to_light"], float)).tolist(),
-                                   "irradiance": {"type": "rgb", "value": l["irradiance"]}}
-                for k, l in enumerate(illumination["lights"])}
-    if kind == "point":
-        return {f"light_{k:03d}": {"type": "point", "position": l["position"],
-                                   "intensity": {"type": "rgb", "value": l["intensity"]}}
-                for k, l in enumerate(illumination["lights"])}
-    to_world = np.eye(4)
-    to_world[:3, :3] = np.asarray(illumination.get("rotation", np.eye(3)), float)
     if kind == "envmap":
+        to_world = np.eye(4)
+        to_world[:3, :3] = np.asarray(illumination.get("rotation", np.eye(3)), float)
         return {"envmap": {"type": "envmap", "filename": "envmap.exr", "to_world": to_world}}
-    if kind == "sunsky":
-        from harness.scene.illumination import Illumination, sunsky_emitter
-
-        light = Illumination.from_json(illumination)
-        return {"sunsky": sunsky_emitter(NUMPY_TRANSFORMS, light)}
-    raise InputError(f"illumination kind {kind!r} has no stock Mitsuba emitter here")
+    if kind not in ("directional", "point", "sunsky"):
+        raise InputError(f"illumination kind {kind!r} has no stock Mitsuba emitter here")
+    return Illumination.from_json(illumination).mitsuba_emitters(NUMPY_TRANSFORMS)
 
 
 def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> dict:

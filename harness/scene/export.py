@@ -22,7 +22,7 @@ from harness import plugins
 from harness.io.exr import write_exr
 from harness.io.mesh import write_uv_ply
 from harness.scene.illumination import Illumination
-from harness.scene.render import build_scene, face_atlas, render_views
+from harness.scene.render import ATLAS_TEXTURE, build_scene, face_atlas, render_views
 from harness.scene.xml import NUMPY_TRANSFORMS, scene_xml
 
 ENVMAP_SIZE = (256, 512)
@@ -84,11 +84,10 @@ def scene_dict(est: Estimate, camera: Camera | None = None, spp: int = 64) -> di
     """
     material = est.model.mitsuba_material()
     if material.kind == "diffuse_mirror":
-        atlas = {"type": "bitmap", "filter_type": "nearest", "wrap_mode": "clamp", "raw": True}
         bsdf = {"type": "blendbsdf", "weight": 0.5,
-                "diffuse": {"type": "diffuse", "reflectance": {**atlas, "filename": "diffuse.exr"}},
+                "diffuse": {"type": "diffuse", "reflectance": {**ATLAS_TEXTURE, "filename": "diffuse.exr"}},
                 "mirror": {"type": "roughconductor", "material": "none", "alpha": 1e-3, "distribution": "ggx",
-                           "specular_reflectance": {**atlas, "filename": "specular.exr"}}}
+                           "specular_reflectance": {**ATLAS_TEXTURE, "filename": "specular.exr"}}}
         shape = {"type": "ply", "filename": "object.ply", "face_normals": True, "bsdf": bsdf}
     else:
         bsdf = {"type": PLUGIN_OF_KIND[material.kind], **material.properties,

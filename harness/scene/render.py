@@ -46,6 +46,10 @@ def make_cameras(spec: CameraSpec, test: bool = False) -> list[Camera]:
             for p in camera_positions(spec, test)]
 
 
+# a one-texel-per-face atlas (face_atlas) read back exactly: nearest texel, no gamma, no wrap
+ATLAS_TEXTURE = {"type": "bitmap", "filter_type": "nearest", "wrap_mode": "clamp", "raw": True}
+
+
 def bsdf_dict(material: float | dict | None) -> dict:
     """The Mitsuba BSDF of a material, its albedos read from the mesh's face attributes.
 
@@ -56,7 +60,7 @@ def bsdf_dict(material: float | dict | None) -> dict:
     part is the dielectric coating's.
     """
     diffuse = {"type": "mesh_attribute", "name": "face_diffuse"}
-    atlas = {"type": "bitmap", "filename": "", "filter_type": "nearest", "wrap_mode": "clamp", "raw": True}
+    atlas = {**ATLAS_TEXTURE, "filename": ""}
     textures = {"diffuse_reflectance": diffuse,
                 "specular_reflectance": {"type": "mesh_attribute", "name": "face_specular"}}
     if material is None:

@@ -76,14 +76,22 @@ def _threads(job: dict) -> None:
         backend.set_thread_count(job["threads"])
 
 
+def _reusable(job: dict) -> dict | None:
+    """The finished job's record (marked reused) unless ``force``; else None, after setting
+    this worker's thread count for the work to come."""
+    done = None if job.get("force") else finished(job["folder"], job["id"])
+    if done:
+        return {**done, "reused": True}
+    _threads(job)
+    return None
+
+
 def dataset_job(job: dict) -> dict:
     """Generate one dataset. ``job``: id, folder, spec_path, profile, overrides, force,
     variant, threads. Returns its record (``reused`` when it was there)."""
-    if not job.get("force"):
-        done = finished(job["folder"], job["id"])
-        if done:
-            return {**done, "reused": True}
-    _threads(job)
+    done = _reusable(job)
+    if done:
+        return done
     from harness.scene.generate import generate
     from harness.scene.spec import load_spec
 
@@ -98,11 +106,9 @@ def run_job(job: dict) -> dict:
     """Estimate and report one dataset with one method. ``job``: id, folder, dataset,
     method, params, mitsuba, force, variant, threads. Returns its record with the report's
     headline metrics (the comparison columns)."""
-    if not job.get("force"):
-        done = finished(job["folder"], job["id"])
-        if done:
-            return {**done, "reused": True}
-    _threads(job)
+    done = _reusable(job)
+    if done:
+        return done
     from harness.cli.suite import run_method
     from reports.html import lookup
     from reports.sweep import SWEEP_METRICS
