@@ -1,12 +1,20 @@
-"""Time and peak memory of generation and estimation against mesh size (earth-specular,
-24 views at 256², its recommended method), one fresh process per size so the peak RSS is
-that size's own.
+"""Time, peak memory and accuracy of generation and estimation against mesh size
+(earth-specular, 24 views, its recommended method), one fresh process per size so each
+peak RSS is that size's own.
 
-    python benchmarks/scale.py [--out DIR] [--subdivisions 5,6] [--resolution 256]
+    python benchmarks/scale.py [--out DIR] [--subdivisions 5,7,8] [--resolution 1024] [--spp 1]
+                               [--pure-pixels]
 
-Subdivision s of the icosphere gives 20 x 4^s faces: 5 -> 20,480, 6 -> 81,920,
-7 -> 327,680. Prints faces, generation and estimation seconds (per stage) and peak RSS, and
-how time grows with faces x directions.
+Subdivision s of the icosphere gives 20 x 4^s faces: 5 -> 20,480, 7 -> 327,680,
+8 -> 1,310,720. At 1024² a face of the 1.3M mesh covers about one pixel, so no pixel lies
+inside a single face: the default uses every pixel centre (``pure_pixels`` off; ``--pure-pixels``
+keeps the scene's setting). Above ``dense_rows`` (1.5 M faces + observations) the estimator
+streams its reflection rows (:class:`estimator.pipeline.Prepared`).
+
+Prints per size: faces, observations, generation and estimation seconds (per stage), the
+peak RSS of each, and the share of faces whose specular albedo is within ±10 % of the truth
+(luminance, least-squares gauge); then how the stages grow: shadow-function time per
+face x direction, observation time per view x pixel.
 """
 from __future__ import annotations
 
@@ -18,51 +26,81 @@ import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-CHILD = r"""
-import json, os, resource, sys, time
+GENERATE = r"""
+import json, resource, sys, time
 sys.path.insert(0, {root!r})
 from harness.scene.generate import generate
 from harness.scene.spec import load_spec, resolve_scene
+t = time.perf_counter()
+generate(load_spec(resolve_scene("earth-specular"), None, {overrides!r}), {folder!r})
+print(json.dumps({{"generate_s": time.perf_counter() - t,
+                  "generate_peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}}))
+"""
+
+ESTIMATE = r"""
+import json, resource, sys
+from dataclasses import replace
+import numpy as np
+sys.path.insert(0, {root!r})
 from harness.io.dataset import read_dataset
 from harness.io.runs import estimator_settings
 from estimator.methods import estimate
-folder = {folder!r}
-t = time.perf_counter()
-if not os.path.isdir(folder):
-    generate(load_spec(resolve_scene("earth-specular"), None, {{"geometry.subdivisions": {sub}, "cameras.width": {res},
-                                                               "cameras.height": {res}}}), folder)
-gen = time.perf_counter() - t
-gen_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-ds = read_dataset(folder, load_test=False, load_truth=False)
+ds = read_dataset({folder!r}, load_test=False, load_truth=False)
 method, config = estimator_settings(ds.meta)
+if not {pure!r}:
+    config = replace(config, pure_pixels=False)
 est = estimate(ds.data, method, config)
-print(json.dumps({{"faces": ds.data.mesh.num_faces, "generate_s": gen, "generate_peak_mib": gen_rss,
-                  "timings": est.info["timings"], "observations": est.info["observations"],
-                  "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}}))
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+truth = read_dataset({folder!r}, load_test=False, load_truth=True).ground_truth.specular
+lum = np.array([0.2126, 0.7152, 0.0722])
+e, t = est.specular[est.observed] @ lum, truth[est.observed] @ lum
+ratio = e * (np.dot(e, t) / np.dot(e, e)) / t
+print(json.dumps({{"faces": ds.data.mesh.num_faces, "views": len(ds.data.views),
+                  "pixels": int(ds.data.views[0].camera.width * ds.data.views[0].camera.height),
+                  "directions": config.directions, "timings": est.info["timings"],
+                  "observations": est.info["observations"], "streamed": "light_faces" in est.info,
+                  "observed_share": float(est.observed.mean()),
+                  "within_10": float(np.mean(np.abs(ratio - 1) < 0.10)), "peak_mib": peak}}))
 """
+
+
+def _child(code: str) -> dict:
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"child failed ({out.returncode}):\n{out.stderr[-3000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="out/bench-scale")
-    p.add_argument("--subdivisions", default="5,6")
-    p.add_argument("--resolution", type=int, default=256)
+    p.add_argument("--subdivisions", default="5,7,8")
+    p.add_argument("--resolution", type=int, default=1024)
+    p.add_argument("--spp", type=int, default=1)
+    p.add_argument("--pure-pixels", action="store_true", help="keep the scene's pure_pixels (on)")
     args = p.parse_args()
     rows = []
     for sub in (int(s) for s in args.subdivisions.split(",")):
-        folder = os.path.abspath(os.path.join(args.out, f"earth-s{sub}-{args.resolution}"))
-        code = CHILD.format(root=ROOT, folder=folder, sub=sub, res=args.resolution)
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-        row = json.loads(out.stdout.strip().splitlines()[-1])
+        folder = os.path.abspath(os.path.join(args.out, f"earth-s{sub}-{args.resolution}-spp{args.spp}"))
+        row = {}
+        if not os.path.isdir(folder):
+            overrides = {"geometry.subdivisions": sub, "cameras.width": args.resolution,
+                         "cameras.height": args.resolution, "render.spp": args.spp}
+            row.update(_child(GENERATE.format(root=ROOT, folder=folder, overrides=overrides)))
+        row.update(_child(ESTIMATE.format(root=ROOT, folder=folder, pure=args.pure_pixels)))
         rows.append(row)
         t = row["timings"]
-        print(f"{row['faces']:8d} faces: estimate {t['total']:6.1f} s (observations {t['observations']:.1f}, "
+        made = (f"generated in {row['generate_s']:.0f} s (peak {row['generate_peak_mib']:.0f} MiB); "
+                if "generate_s" in row else "")
+        print(f"{row['faces']:9d} faces: {made}estimate {t['total']:6.1f} s (observations {t['observations']:.1f}, "
               f"visibility {t['visibility']:.1f}, reflection {t['reflection']:.1f}, solve {t['solve']:.1f}), "
-              f"peak {row['peak_mib']:.0f} MiB; {row['observations']} observations", flush=True)
-    for a, b in zip(rows, rows[1:]):
-        print(f"x{b['faces'] / a['faces']:.1f} faces: estimate x{b['timings']['total'] / a['timings']['total']:.2f}, "
-              f"visibility x{b['timings']['visibility'] / a['timings']['visibility']:.2f}, "
-              f"peak x{b['peak_mib'] / a['peak_mib']:.2f}")
+              f"peak {row['peak_mib']:.0f} MiB; {row['observations']} observations"
+              f"{' (streamed)' if row['streamed'] else ''}; {100 * row['within_10']:.1f} % within ±10 %", flush=True)
+    for row in rows:
+        t = row["timings"]
+        print(f"{row['faces']:9d} faces: shadow function {1e9 * t['visibility'] / (row['faces'] * row['directions']):.1f}"
+              f" ns per face x direction; observations {1e9 * t['observations'] / (row['views'] * row['pixels']):.0f}"
+              f" ns per view x pixel; solve {1e6 * t['solve'] / row['observations']:.1f} us per observation")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "scale.json"), "w") as f:
         json.dump(rows, f, indent=1)

@@ -50,16 +50,21 @@ def find_libllvm(min_version: int = MIN_LLVM) -> str | None:
     return max(found)[1] if found else None
 
 
-def cuda_available() -> bool:
-    """True when the CUDA driver loads and reports at least one device."""
+def cuda_device_count() -> int:
+    """CUDA devices the driver reports (0 when the driver does not load or fails)."""
     try:
         lib = ctypes.CDLL("libcuda.so.1")
     except OSError:
-        return False
+        return 0
     count = ctypes.c_int(0)
     if lib.cuInit(0) != 0 or lib.cuDeviceGetCount(ctypes.byref(count)) != 0:
-        return False
-    return count.value > 0
+        return 0
+    return int(count.value)
+
+
+def cuda_available() -> bool:
+    """True when the CUDA driver loads and reports at least one device."""
+    return cuda_device_count() > 0
 
 
 def _prepare_llvm() -> None:

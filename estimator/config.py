@@ -110,6 +110,18 @@ class EstimatorConfig:
         ``mitsuba-ad`` peer: wall-clock seconds of Adam steps, the rendered width it aims at
         (the views are box-averaged by an integer factor), samples per pixel, Adam's
         learning rate, and the final envmap height (it starts at half, doubling halfway).
+    dense_rows : faces plus kept observations above which the reflection rows (float64, M
+        wide) are not held in memory but computed in chunks when needed
+        (:class:`estimator.pipeline.Prepared`); only the per-face methods stream
+        (``bilinear-per-face``, ``known-illumination``, ``median-color``), the others refuse a
+        larger problem with an error that says so. The default, 1.5 M rows, holds at most
+        1.4 GiB of rows.
+    light_faces : a streamed per-face solve finds the light from the observations of this
+        many observed faces drawn at random (seeded), then every face's albedos with the
+        light fixed: 121 light coefficients are determined many times over by 20,000 faces
+        (earth-specular, 20,480 faces at 1024²: the light from 5,000 faces is 0.03 % from the
+        held solve's, the albedos 0.03 % apart at the median, 98.05 % within ±10 % either
+        way; benchmarks/README.md).
     variant : Mitsuba variant for the ray queries (None: auto).
     """
 
@@ -163,6 +175,8 @@ class EstimatorConfig:
     ad_spp: int = 4
     ad_learning_rate: float = 0.02
     ad_envmap_height: int = 16
+    dense_rows: int = 1_500_000
+    light_faces: int = 20_000
     variant: str | None = None
 
     def __post_init__(self):
@@ -203,6 +217,8 @@ class EstimatorConfig:
             (self.ad_resolution >= 8 and self.ad_spp >= 1 and self.ad_envmap_height >= 4,
              "ad_resolution must be >= 8, ad_spp >= 1 and ad_envmap_height >= 4"),
             (self.ad_learning_rate > 0, "ad_learning_rate must be > 0"),
+            (self.dense_rows >= 1, "dense_rows must be >= 1"),
+            (self.light_faces >= 1, "light_faces must be >= 1"),
             (0 <= self.segment_min_shading < 1, "segment_min_shading must lie in [0, 1)"),
             (self.segment_threshold > 0 and self.uniform_spread > 0,
              "segment_threshold and uniform_spread must be > 0"),

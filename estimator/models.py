@@ -64,9 +64,11 @@ class ReflectionModel(ABC):
         self.config = config
         self.order = config.sh_order
 
-    def diffuse_matrix(self, mesh: TriangleMesh, sampling: SphereSampling, visibility: Visibility) -> np.ndarray:
-        """(F, M) diffuse rows C_i multiplying the light unknown (the paper's Eq. 13)."""
-        return diffuse_matrix(mesh, sampling, visibility, self.order)
+    def diffuse_matrix(self, mesh: TriangleMesh, sampling: SphereSampling, visibility: Visibility,
+                       faces: np.ndarray | None = None) -> np.ndarray:
+        """(F, M) diffuse rows C_i multiplying the light unknown (the paper's Eq. 13); (n, M)
+        for the faces (n,) only, when given."""
+        return diffuse_matrix(mesh, sampling, visibility, self.order, faces)
 
     @abstractmethod
     def specular_rows(self, faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
@@ -117,12 +119,12 @@ class DefilteredModel(PaperModel):
     name = "defiltered"
     uses_exponent = True
 
-    def diffuse_matrix(self, mesh, sampling, visibility):
+    def diffuse_matrix(self, mesh, sampling, visibility, faces=None):
         c = self.config
         gains = np.ones(self.order + 1)
         f = sh.phong_filter(self.order, c.phong_exponent)
         gains[: c.defilter_order + 1] = 1.0 / f[: c.defilter_order + 1]
-        return super().diffuse_matrix(mesh, sampling, visibility) * sh.expand_per_degree(gains)[None]
+        return super().diffuse_matrix(mesh, sampling, visibility, faces) * sh.expand_per_degree(gains)[None]
 
     def mitsuba_material(self):
         return ReflectionModel.mitsuba_material(self)

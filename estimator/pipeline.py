@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import sh
 from .config import EstimatorConfig
 from .data import MultiViewData
 from .models import ReflectionModel, reflection_model
@@ -14,6 +15,8 @@ from .raycast import RayCaster
 from .reflection import mirror_directions
 from .visibility import SphereSampling, Visibility, compute_visibility, sphere_sampling
 from .errors import InputError
+
+ROW_CHUNK = 65_536   # rows of a reflection matrix computed at once when they are streamed (~63 MB)
 
 
 @dataclass
@@ -25,10 +28,15 @@ class Prepared:
     model : the reflection model of ``config``.
     all_obs : every observation (for median colours).
     obs : observations kept for the solve (``min_cos_view`` cut).
-    c_matrix : (F, M) the model's diffuse rows of every face.
-    d_rows : (N, M) the model's specular rows of ``obs``. Both multiply the model's
-        light unknown (h, or L for a radiance model).
+    c_matrix : (F, M) the model's diffuse rows of every face, or None when streamed.
+    d_rows : (N, M) the model's specular rows of ``obs``, or None when streamed. Both
+        multiply the model's light unknown (h, or L for a radiance model).
     timings : seconds per stage.
+
+    A problem larger than ``config.dense_rows`` (faces plus kept observations) is
+    *streamed*: the rows are never held whole, and :meth:`diffuse_rows`,
+    :meth:`specular_rows`, :meth:`shading` and :meth:`gloss` compute them in chunks of
+    :data:`ROW_CHUNK`, so memory stays linear in faces and observations with small constants.
     """
 
     data: MultiViewData
@@ -44,16 +52,81 @@ class Prepared:
     timings: dict = field(default_factory=dict)
 
     @property
+    def streamed(self) -> bool:
+        """True when the reflection rows are computed on demand instead of held."""
+        return self.d_rows is None
+
+    @property
     def c_rows(self) -> np.ndarray:
-        """(N, M) diffuse matrix row of each kept observation's face."""
+        """(N, M) diffuse matrix row of each kept observation's face (held rows only)."""
+        if self.streamed:
+            raise InputError("the reflection rows of this problem are streamed (config.dense_rows): "
+                             "use diffuse_rows/specular_rows on chunks")
         return self.c_matrix[self.obs.face]
+
+    def diffuse_rows(self, faces: np.ndarray) -> np.ndarray:
+        """(n, M) diffuse rows C_i of the faces (n,)."""
+        if not self.streamed:
+            return self.c_matrix[faces]
+        return self.model.diffuse_matrix(self.data.mesh, self.sampling, self.visibility, faces)
+
+    def specular_rows(self, rows: np.ndarray) -> np.ndarray:
+        """(n, M) specular rows D_k of the kept observations ``rows`` (n,) (indices into ``obs``)."""
+        if not self.streamed:
+            return self.d_rows[rows]
+        face = self.obs.face[rows]
+        mirror = mirror_directions(self.data.mesh.face_normals[face], self.obs.view_dir[rows])
+        return self.model.specular_rows(face, mirror, self.sampling, self.visibility)
+
+    def shading(self, light: np.ndarray) -> np.ndarray:
+        """(F, C) C_i . x of every face under the light unknown ``light`` (M, C)."""
+        if not self.streamed:
+            return self.c_matrix @ light
+        f = self.data.mesh.num_faces
+        return np.concatenate([self.diffuse_rows(np.arange(s, min(s + ROW_CHUNK, f))) @ light
+                               for s in range(0, f, ROW_CHUNK)])
+
+    def gloss(self, light: np.ndarray) -> np.ndarray:
+        """(N, C) D_k . x of every kept observation under the light unknown ``light`` (M, C)."""
+        if not self.streamed:
+            return self.d_rows @ light
+        n = len(self.obs.face)
+        return np.concatenate([self.specular_rows(np.arange(s, min(s + ROW_CHUNK, n))) @ light
+                               for s in range(0, n, ROW_CHUNK)])
+
+    def face_subset(self, faces: np.ndarray) -> "Prepared":
+        """The problem restricted to ``faces`` (S,) (sorted, unique), renumbered 0..S-1,
+        with its rows held: a light solved on it is a light of the whole problem."""
+        mapping = np.full(self.obs.num_faces, -1, dtype=np.int64)
+        mapping[faces] = np.arange(len(faces))
+        rows = np.nonzero(mapping[self.obs.face] >= 0)[0]
+        sub = self.obs.subset(mapping[self.obs.face] >= 0)
+        sub = Observations(mapping[sub.face], sub.rgb, sub.view_dir, len(faces), sub.num_views, sub.rejected,
+                           sub.view)
+        return Prepared(self.data, self.config, self.model, self.caster, self.sampling, self.visibility,
+                        self.all_obs, sub, self.diffuse_rows(faces), self.specular_rows(rows), dict(self.timings))
+
+    def projected(self, light: np.ndarray) -> "Prepared":
+        """The same observations with the light fixed to ``light`` (M, 3): each row becomes
+        its three per-channel projections (C_i . x, D_k . x), so a solve with the light
+        fixed to the identity (3, 3) gives the albedos under ``light`` in O(N) memory."""
+        return Prepared(self.data, self.config, self.model, self.caster, self.sampling, self.visibility,
+                        self.all_obs, self.obs, self.shading(light), self.gloss(light), dict(self.timings))
 
 
 def _model_matrices(data: MultiViewData, model: ReflectionModel, sampling: SphereSampling,
-                    visibility: Visibility, obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+                    visibility: Visibility, obs: Observations) -> tuple[np.ndarray | None, np.ndarray | None]:
+    if streams(data, model.config, obs):
+        return None, None
     c_matrix = model.diffuse_matrix(data.mesh, sampling, visibility)
     mirror = mirror_directions(data.mesh.face_normals[obs.face], obs.view_dir)
     return c_matrix, model.specular_rows(obs.face, mirror, sampling, visibility)
+
+
+def streams(data: MultiViewData, config: EstimatorConfig, obs: Observations) -> bool:
+    """Whether a problem's reflection rows are streamed: faces plus kept observations
+    exceed ``config.dense_rows``."""
+    return data.mesh.num_faces + len(obs.face) > config.dense_rows
 
 
 def with_config(prep: Prepared, config: EstimatorConfig) -> Prepared:
@@ -71,8 +144,14 @@ def with_config(prep: Prepared, config: EstimatorConfig) -> Prepared:
                     c_matrix, d_rows, timings)
 
 
-def prepare(data: MultiViewData, config: EstimatorConfig, log=None) -> Prepared:
-    """Run the shared stages. ``log`` (optional callable) receives progress lines."""
+def prepare(data: MultiViewData, config: EstimatorConfig, log=None, method: str | None = None,
+            streaming: bool = True) -> Prepared:
+    """Run the shared stages. ``log`` (optional callable) receives progress lines.
+
+    ``streaming`` False (a method that needs the rows held) refuses, before the shadow
+    function is computed, a problem larger than ``config.dense_rows``; ``method`` names it
+    in the message.
+    """
     say = log or (lambda message: None)
     timings = {}
     t = time.perf_counter()
@@ -87,6 +166,15 @@ def prepare(data: MultiViewData, config: EstimatorConfig, log=None) -> Prepared:
     timings["observations"] = time.perf_counter() - t
     say(f"observations: {len(all_obs.face)} (face, view) pairs, {len(obs.face)} kept "
         f"(view within acos({config.min_cos_view}) of the normal)")
+    if streams(data, config, obs):
+        if not streaming:
+            raise InputError(f"method {method!r} holds its reflection rows in memory, and this problem has "
+                             f"{data.mesh.num_faces} faces + {len(obs.face)} observations > dense_rows="
+                             f"{config.dense_rows} (at most {config.dense_rows * sh.num_coeffs(config.sh_order) * 8 / 2**30:.1f}"
+                             " GiB of rows): use bilinear-per-face, known-illumination or median-color, which "
+                             "stream them, or raise dense_rows")
+        say(f"streamed rows: {data.mesh.num_faces} faces + {len(obs.face)} observations > dense_rows "
+            f"{config.dense_rows}")
 
     t = time.perf_counter()
     sampling = sphere_sampling(config.directions)

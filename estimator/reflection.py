@@ -9,20 +9,26 @@ from .visibility import SphereSampling, Visibility
 
 
 def diffuse_matrix(mesh: TriangleMesh, sampling: SphereSampling, visibility: Visibility, order: int,
-                   chunk: int = 4096) -> np.ndarray:
+                   faces: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
     """C_lm^(i) = (1/pi) int s_i(w) Y_lm(w) max(0, w . n_i) dw, by the sphere-mesh quadrature.
+
+    Parameters
+    ----------
+    faces : (n,) the faces whose rows are wanted; None: every face.
 
     Returns
     -------
-    (F, (L + 1)^2) float64. Computed in chunks of faces (matrix products, no per-face loop).
+    (n, (L + 1)^2) float64 (n = F without ``faces``). Computed in chunks of faces
+    (matrix products, no per-face loop).
     """
     y_weighted = sh.basis(order, sampling.directions) * (sampling.weights / np.pi)[:, None]   # (K, M)
+    faces = np.arange(mesh.num_faces) if faces is None else np.asarray(faces)
     normals = mesh.face_normals
-    out = np.empty((mesh.num_faces, sh.num_coeffs(order)))
-    for start in range(0, mesh.num_faces, chunk):
-        stop = min(start + chunk, mesh.num_faces)
-        cos = np.maximum(normals[start:stop] @ sampling.directions.T, 0.0)
-        out[start:stop] = (cos * visibility.unpack(slice(start, stop))) @ y_weighted
+    out = np.empty((len(faces), sh.num_coeffs(order)))
+    for start in range(0, len(faces), chunk):
+        part = faces[start:start + chunk]
+        cos = np.maximum(normals[part] @ sampling.directions.T, 0.0)
+        out[start:start + len(part)] = (cos * visibility.unpack(part)) @ y_weighted
     return out
 
 

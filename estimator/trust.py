@@ -24,22 +24,32 @@ ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
 MAX_UNKEPT = 0.2            # share of faces without a kept observation
 
 
-def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
-    """(N, 3) residuals of the kept observations under the estimate, and (N,) their colour
-    norms relative to the exposure level (:func:`estimator.robust.relative_residuals`)."""
+CONDITION_ROWS = 200_000    # a streamed problem's light condition is taken on this many rows drawn at random
+
+
+def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 3) residuals of the kept observations under the estimate, (N,) their colour
+    norms relative to the exposure level (:func:`estimator.robust.relative_residuals`), and
+    (N, 3) each row's diffuse shading C . x."""
     obs = prep.obs
-    light = est.light
-    predicted = est.model.predict(est.diffuse[obs.face], est.specular[obs.face], prep.c_rows, prep.d_rows, light)
-    return obs.rgb - predicted, relative_residuals(obs.rgb, predicted)
+    shade = prep.shading(est.light)[obs.face]
+    predicted = est.diffuse[obs.face] * shade + est.specular[obs.face] * prep.gloss(est.light)
+    return obs.rgb - predicted, relative_residuals(obs.rgb, predicted), shade
 
 
 def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
     """Largest condition number over channels of the light's least-squares system with the
-    albedos fixed (rows: the observations used), sqrt of the normal matrix's eigenvalue ratio."""
-    face = prep.obs.face[rows]
+    albedos fixed (rows: (N,) bool, the observations used), sqrt of the normal matrix's
+    eigenvalue ratio. A streamed problem uses at most :data:`CONDITION_ROWS` of them, drawn
+    at random (seed 0)."""
+    index = np.nonzero(rows)[0]
+    if prep.streamed and len(index) > CONDITION_ROWS:
+        index = np.sort(np.random.default_rng(0).choice(index, CONDITION_ROWS, replace=False))
+    face = prep.obs.face[index]
+    c_rows, d_rows = prep.diffuse_rows(face), prep.specular_rows(index)
     worst = 1.0
     for k in range(3):
-        jac = est.diffuse[face, k, None] * prep.c_rows[rows] + est.specular[face, k, None] * prep.d_rows[rows]
+        jac = est.diffuse[face, k, None] * c_rows + est.specular[face, k, None] * d_rows
         eig = np.linalg.eigvalsh(jac.T @ jac)
         if eig[-1] <= 0:
             return float("inf")
@@ -61,7 +71,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     """
     obs = prep.obs
     f = obs.num_faces
-    residual, relative = observation_residuals(prep, est)
+    residual, relative, shade = observation_residuals(prep, est)
     estimated = est.observed[obs.face]
     scale = robust_scale(relative[estimated]) if estimated.any() else 0.0
     outlier = relative > OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE)
@@ -74,7 +84,6 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
                       "outlier_share": float(outlier[sel].mean()) if sel.any() else None,
                       "gross_share": float(np.mean(relative[sel] > GROSS_RESIDUAL)) if sel.any() else None})
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
-    shade = prep.c_rows @ est.light
     sigma = 1.4826 * np.median(np.abs(residual[estimated]), axis=0) if estimated.any() else np.zeros(3)
     info = np.stack([np.bincount(obs.face, shade[:, k] ** 2 * ~outlier, minlength=f) for k in range(3)], 1)
     with np.errstate(divide="ignore", invalid="ignore"):

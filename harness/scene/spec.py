@@ -88,7 +88,7 @@ class GeometrySpec:
         _choice("geometry.type", self.type, ("icosphere", "blob", "bumpy", "mesh"))
         _num("geometry.bumps", self.bumps, 0, 0.5)
         _num("geometry.frequency", self.frequency, 3, 16, integer=True)
-        _num("geometry.subdivisions", self.subdivisions, 0, 7, integer=True)
+        _num("geometry.subdivisions", self.subdivisions, 0, 8, integer=True)  # 8: 1,310,720 faces
         _num("geometry.radius", self.radius, 0, lo_open=True)
         _num("geometry.lobes", self.lobes, 1, 16, integer=True)
         _num("geometry.depth", self.depth, 0, 0.9)
