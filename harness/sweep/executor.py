@@ -20,12 +20,19 @@ def worker_threads(workers: int, cores: int | None = None) -> int:
     return max(1, (cores or os.cpu_count() or 1) // max(workers, 1))
 
 
+def _pin_gpu(devices) -> None:
+    """Pool initializer: this worker takes the next free CUDA device (before Dr.Jit starts)."""
+    os.environ["CUDA_VISIBLE_DEVICES"] = str(devices.get())
+
+
 def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "local", workers: int = 1,
-             scheduler: str | None = None) -> Iterator[tuple[dict, dict | BaseException]]:
+             scheduler: str | None = None, gpus: int = 0) -> Iterator[tuple[dict, dict | BaseException]]:
     """Run ``fn`` on every job; yield (job, result) or (job, exception) in completion order.
 
     local, workers 1: in this process, in order. local, workers > 1: a process pool started
-    with ``spawn`` (Dr.Jit state must never be forked). dask: ``dask.distributed.Client``
+    with ``spawn`` (Dr.Jit state must never be forked); with ``gpus`` > 0 (the CUDA variant)
+    the pool has one worker per GPU, at most ``workers``, each pinned to its own device
+    through ``CUDA_VISIBLE_DEVICES``. dask: ``dask.distributed.Client``
     connected to ``scheduler`` (``tcp://HOST:PORT``) or to a scheduler object/address a
     caller made (e.g. a ``LocalCluster``); it needs ``pip install .[dask]``.
     """
@@ -46,13 +53,21 @@ def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "loca
                 yield job, exc
         return
     context = multiprocessing.get_context("spawn")
+    initializer, initargs = None, ()
+    if gpus > 0:
+        workers = min(workers, gpus)
+        devices = context.Queue()
+        for device in range(workers):
+            devices.put(device)
+        initializer, initargs = _pin_gpu, (devices,)
     # spawned workers inherit the environment (they start on the first submit): one BLAS/OpenMP
     # pool each, of their share of the cores
     share = str(worker_threads(workers))
     saved = {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}
     os.environ.update({k: share for k in BLAS_THREAD_VARIABLES})
     try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=initializer,
+                                 initargs=initargs) as pool:
             futures = {pool.submit(fn, job): job for job in jobs}
             try:
                 for future in as_completed(futures):

@@ -14,6 +14,7 @@ import time
 
 from tqdm import tqdm
 
+from estimator import backend
 from estimator.errors import InputError
 from reports import sweep as sweep_report
 
@@ -52,10 +53,10 @@ def plan(suite: dict, out_dir: str, mitsuba: bool = False, force: bool = False, 
     return list(unique.values()), list(unique_runs.values())
 
 
-def _execute(fn, jobs, what, executor, workers, scheduler, log) -> dict[str, dict]:
+def _execute(fn, jobs, what, executor, workers, scheduler, log, gpus=0) -> dict[str, dict]:
     results, failed = {}, []
     with tqdm(total=len(jobs), desc=what, unit="job", disable=None) as bar:
-        for job, result in run_jobs(fn, jobs, executor, workers, scheduler):
+        for job, result in run_jobs(fn, jobs, executor, workers, scheduler, gpus):
             bar.update(1)
             name = os.path.basename(job["folder"])
             if isinstance(result, BaseException):
@@ -81,10 +82,12 @@ def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int =
     (:func:`reports.sweep.regressions`).
     """
     t0 = time.perf_counter()
-    threads = worker_threads(workers) if executor == "local" and workers > 1 else None
+    # the CUDA variant: one worker per GPU (Dr.Jit's CPU thread count does not apply)
+    gpus = backend.cuda_device_count() if backend.resolve_variant(variant) == "cuda_ad_rgb" else 0
+    threads = worker_threads(workers) if executor == "local" and workers > 1 and not gpus else None
     datasets, runs = plan(suite, out_dir, mitsuba, force, variant, threads)
-    done_d = _execute(dataset_job, datasets, "dataset", executor, workers, scheduler, log)
-    done_r = _execute(run_job, runs, "run", executor, workers, scheduler, log)
+    done_d = _execute(dataset_job, datasets, "dataset", executor, workers, scheduler, log, gpus)
+    done_r = _execute(run_job, runs, "run", executor, workers, scheduler, log, gpus)
     rows = [{"scene": r["scene"], "label": r["label"], "method": r["method"], "axes": r["axes"], "seed": r["seed"],
              "run": r["folder"], "seconds": done_r[r["id"]]["estimate_seconds"],
              **done_r[r["id"]]["metrics"]} for r in runs]

@@ -75,6 +75,23 @@ def test_pool_runs_jobs_and_reports_failures_per_job():
     assert results[2] == {"y": 4} and results[3] == {"y": 9} and isinstance(results[-1], ValueError)
 
 
+def _device(job):
+    import os
+    import time
+
+    time.sleep(0.3)   # long enough for every worker to take a job
+    return {"device": os.environ.get("CUDA_VISIBLE_DEVICES"), "pid": os.getpid()}
+
+
+def test_gpu_pool_pins_one_worker_per_device():
+    # no GPU here: the pinning itself is what is tested (the CUDA variant passes gpus > 0)
+    results = [r for _, r in run_jobs(_device, [{"x": i} for i in range(6)], "local", 4, gpus=2)]
+    pids = {r["pid"] for r in results}
+    assert len(pids) == 2                                      # one worker per GPU, not --jobs 4
+    assert {r["device"] for r in results} == {"0", "1"}
+    assert all(len({r["device"] for r in results if r["pid"] == p}) == 1 for p in pids)
+
+
 def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     out = tmp_path / "smoke"
     assert main(["suite", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
