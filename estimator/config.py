@@ -110,6 +110,9 @@ class EstimatorConfig:
         ``mitsuba-ad`` peer: wall-clock seconds of Adam steps, the rendered width it aims at
         (the views are box-averaged by an integer factor), samples per pixel, Adam's
         learning rate, and the final envmap height (it starts at half, doubling halfway).
+    ad_specular : ``mitsuba-ad`` fits a per-face specular albedo too, under Mitsuba's
+        ``blendbsdf`` of diffuse and a near-mirror ``roughconductor`` (:mod:`estimator.peer`);
+        False: Lambertian only.
     dense_rows : faces plus kept observations above which the reflection rows (float64, M
         wide) are not held in memory but computed in chunks when needed
         (:class:`estimator.pipeline.Prepared`); only the per-face methods stream
@@ -175,6 +178,7 @@ class EstimatorConfig:
     ad_spp: int = 4
     ad_learning_rate: float = 0.02
     ad_envmap_height: int = 16
+    ad_specular: bool = True
     dense_rows: int = 1_500_000
     light_faces: int = 20_000
     variant: str | None = None

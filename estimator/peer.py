@@ -1,17 +1,22 @@
 """The peer a user would otherwise reach for: gradient-based inverse rendering with
 Mitsuba 3's differentiable renderer, registered as the method ``mitsuba-ad``.
 
-Unknowns: a per-face diffuse albedo (a ``mesh_attribute`` of the mesh, Lambertian BSDF) and
-a low-resolution lat-long environment map of radiance. Each step renders one training view
-(round robin) with ``prb`` (direct light with shadows, background hidden) at a reduced
-resolution and a few samples, takes the L2 loss against the view's image averaged to that
-resolution, and updates both with Adam; values are clipped at a small positive floor
-(positivity). The envmap is coarse to fine: its resolution doubles halfway through the time
-budget. The run stops at ``ad_time_budget`` seconds.
+Unknowns: a per-face diffuse albedo and a per-face specular weight (``mesh_attribute``s of
+the mesh: a ``blendbsdf`` of a Lambertian ``diffuse`` and a near-mirror ``roughconductor``,
+GGX alpha :data:`AD_GLOSS_ALPHA`, weighted by w per face; Mitsuba's ``plastic`` cannot take
+mesh-attribute textures), and a low-resolution lat-long environment map of radiance. Each
+step renders one training view (round robin) with ``prb`` (direct light with shadows, the
+glossy reflection of the envmap, background hidden) at a reduced resolution and a few
+samples, takes the L2 loss against the view's image averaged to that resolution, and
+updates all of them with Adam; values are clipped at a small positive floor (positivity),
+w at 1. The envmap is coarse to fine: its resolution doubles halfway through the time
+budget. The run stops at ``ad_time_budget`` seconds. ``ad_specular`` False keeps the
+Lambertian model (no specular unknown).
 
 The light becomes the estimate's pseudo illumination as for every method: the envmap's
 radiance projected to SH, filtered by the Phong lobe of ``phong_exponent``, in the unit-DC
-gauge. Not modelled (yet): a specular albedo (the estimate's is 0).
+gauge. The estimate's diffuse albedo is (1 - w) x the fitted albedo, its specular albedo w
+(grey), both in that gauge.
 """
 from __future__ import annotations
 
@@ -25,6 +30,8 @@ from .data import Estimate, View
 from .errors import InputError
 from .methods import Method, register_method
 from .raycast import mitsuba_mesh
+
+AD_GLOSS_ALPHA = 0.05   # GGX roughness of the peer's specular lobe (a near-mirror coat)
 
 
 def downsample(view: View, factor: int) -> np.ndarray:
@@ -70,10 +77,19 @@ class MitsubaAD(Method):
         level = float(np.mean([np.mean(v.rgb[v.alpha > 0.5]) if v.alpha is not None else np.mean(v.rgb)
                                for v in views]))
         props = mi.Properties()
-        props["bsdf"] = mi.load_dict({"type": "diffuse",
-                                      "reflectance": {"type": "mesh_attribute", "name": "face_albedo"}})
+        albedo_texture = {"type": "mesh_attribute", "name": "face_albedo"}
+        bsdf = {"type": "diffuse", "reflectance": albedo_texture}
+        if c.ad_specular:   # plastic's constructor needs a texture mean, which mesh attributes lack
+            bsdf = {"type": "blendbsdf", "weight": {"type": "mesh_attribute", "name": "face_specular"},
+                    "diffuse": bsdf, "gloss": {"type": "roughconductor", "material": "none", "alpha": AD_GLOSS_ALPHA}}
+        props["bsdf"] = mi.load_dict(bsdf)
         shape = mitsuba_mesh(mesh, "object", props=props)
         shape.add_attribute("face_albedo", 3, mi.Float(np.full(3 * mesh.num_faces, 0.5, np.float32)))
+        unknowns = ["object.face_albedo"]
+        if c.ad_specular:
+            shape.add_attribute("face_specular", 1, mi.Float(np.full(mesh.num_faces, 0.1, np.float32)))
+            unknowns.append("object.face_specular")
+        unknowns.append("emitter.data")
         height = max(2, c.ad_envmap_height // 2)
         env0 = np.full((height, 2 * height, 3), max(level / 0.5, 1e-3), np.float32)
         scene = mi.load_dict({
@@ -85,8 +101,8 @@ class MitsubaAD(Method):
         })
         params = mi.traverse(scene)
         opt = mi.ad.Adam(lr=c.ad_learning_rate)
-        opt["object.face_albedo"] = params["object.face_albedo"]
-        opt["emitter.data"] = params["emitter.data"]
+        for key in unknowns:
+            opt[key] = params[key]
         params.update(opt)
         t0 = time.perf_counter()
         history = {"seconds": [], "loss": [], "envmap": []}
@@ -113,14 +129,18 @@ class MitsubaAD(Method):
             loss = dr.mean(dr.square(image[:, :, :3] - refs[view]), axis=None)
             dr.backward(loss)
             opt.step()
-            for key in ("object.face_albedo", "emitter.data"):
-                opt[key] = dr.clip(opt[key], 1e-4, 1e4)
+            for key in unknowns:
+                opt[key] = dr.clip(opt[key], 1e-4, 1.0 if key == "object.face_specular" else 1e4)
             params.update(opt)
             history["seconds"].append(time.perf_counter() - t0)
             history["loss"].append(float(np.array(loss).ravel()[0]))
             history["envmap"].append(list(np.array(opt["emitter.data"]).shape[:2]))
             step += 1
         albedo = np.array(opt["object.face_albedo"], dtype=np.float64).reshape(-1, 3)
+        specular = np.zeros_like(albedo)
+        if c.ad_specular:   # the blend's weight w: (1 - w) x albedo is the Lambertian part
+            weight = np.clip(np.array(opt["object.face_specular"], dtype=np.float64), 0.0, 1.0)
+            albedo, specular = albedo * (1.0 - weight)[:, None], np.repeat(weight[:, None], 3, axis=1)
         env = np.array(opt["emitter.data"], dtype=np.float64)[..., :3]
         radiance = sh.project_latlong(c.sh_order, env)
         pseudo = sh.phong_filtered(radiance, c.phong_exponent)
@@ -131,8 +151,9 @@ class MitsubaAD(Method):
                 "ad_history": {"seconds": history["seconds"], "loss": history["loss"],
                                "snapshot_seconds": snapshot_seconds},
                 "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),
-                                       "unknowns": int(3 * f + env.size)}}
-        est = Estimate(np.where(observed[:, None], albedo * dc, 0.0), np.zeros((f, 3)), pseudo / dc,
+                                       "unknowns": int(3 * f + (f if c.ad_specular else 0) + env.size)}}
+        est = Estimate(np.where(observed[:, None], albedo * dc, 0.0), np.where(observed[:, None], specular * dc, 0.0),
+                       pseudo / dc,
                        np.where(observed, np.arange(f), -1), observed, self.name, c, info)
         est.face_stats["albedo_history"] = np.stack(snapshots, axis=1) * dc   # (F, K, 3), same gauge
         return est
