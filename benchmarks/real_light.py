@@ -4,11 +4,13 @@ with interreflections) for several methods, at full size by default.
     python benchmarks/real_light.py [--out DIR] [--probes lab,park,...] [--rotations 0,120]
                                     [--materials plastic,roughplastic,diffuse]
                                     [--methods NAME,...] [--scene real-light] [--profile tiny]
+                                    [--set KEY=VALUE ...] [--name real_light]
 
 Datasets are generated once into DIR (reused when present). Prints one row per
 (scene, material, probe, rotation, method): diffuse-albedo PSNR after a per-channel
 least-squares scale, share of faces within ±10 % (least-squares gauge, luminance), ARI,
-estimate time; writes the rows to DIR/real_light.json.
+estimate time; writes the rows to DIR/NAME.json. ``--set`` overrides estimator settings
+(JSON values, e.g. ``--set retinex_ridge=1e-11``) for every method.
 """
 from __future__ import annotations
 
@@ -54,7 +56,14 @@ def main() -> None:
     p.add_argument("--probes", default="lab,park,studio,city,sunrise,apartment")
     p.add_argument("--rotations", default="0,120")
     p.add_argument("--methods", default="bilinear-clustered")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="estimator setting for every method (value parsed as JSON)")
+    p.add_argument("--name", default="real_light", help="basename of the written .json")
     args = p.parse_args()
+    overrides = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        overrides[key] = json.loads(value)
     rows = []
     for material in args.materials.split(","):
         for probe in args.probes.split(","):
@@ -70,7 +79,7 @@ def main() -> None:
                 ds = read_dataset(folder, load_test=False, load_truth=False)
                 truth = read_ground_truth(folder, ds.data.mesh.num_faces)
                 for method in args.methods.split(","):
-                    m, config = estimator_settings(ds.meta, method)
+                    m, config = estimator_settings(ds.meta, method, overrides or None)
                     t = time.perf_counter()
                     est = estimate(ds.data, m, config)
                     seconds = time.perf_counter() - t
@@ -83,7 +92,7 @@ def main() -> None:
                           f"±10% {row['within_10']:.3f}  ARI {ari}  clusters {row['clusters']}  "
                           f"{seconds:5.1f} s", flush=True)
     os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, "real_light.json"), "w") as f:
+    with open(os.path.join(args.out, f"{args.name}.json"), "w") as f:
         json.dump(rows, f, indent=1)
     for method in sorted({r["method"] for r in rows}):
         sel = [r for r in rows if r["method"] == method]
