@@ -93,7 +93,8 @@ def main() -> None:
         made = (f"generated in {row['generate_s']:.0f} s (peak {row['generate_peak_mib']:.0f} MiB); "
                 if "generate_s" in row else "")
         print(f"{row['faces']:9d} faces: {made}estimate {t['total']:6.1f} s (observations {t['observations']:.1f}, "
-              f"visibility {t['visibility']:.1f}, reflection {t['reflection']:.1f}, solve {t['solve']:.1f}), "
+              f"visibility {t['visibility']:.1f}, reflection {t['reflection']:.1f}, solve {t['solve']:.1f}, "
+              f"trust {t.get('trust', 0.0):.1f}), "
               f"peak {row['peak_mib']:.0f} MiB; {row['observations']} observations"
               f"{' (streamed)' if row['streamed'] else ''}; {100 * row['within_10']:.1f} % within ±10 %", flush=True)
     for row in rows:

@@ -133,7 +133,6 @@ class Method(ABC):
                               c.components, c.iterations, c.tol, fixed_light, schedule=c.lm_schedule,
                               initial_light=initial_light)
 
-
     def _solve_per_face(self, prep: Prepared, fixed_light: np.ndarray | None = None) -> Estimate:
         """Every observed face its own group. A streamed problem (:attr:`Prepared.streamed`)
         is solved in two steps of bounded memory: the light from the observations of
@@ -673,14 +672,17 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         if not np.all(np.isfinite(getattr(est, name))):
             raise InputError(f"the solve produced non-finite {name}: the observations do not determine the "
                              "albedos and the light (too few lit views or faces?)")
-    est.info["timings"] = {**prep.timings, "solve": time.perf_counter() - t, "total": time.perf_counter() - t0}
+    solve_seconds = time.perf_counter() - t
     est.info["observations"] = int(len(prep.obs.face))
     est.info["observations_all"] = int(len(prep.all_obs.face))
     est.info["unobserved_share"] = float(1.0 - est.observed.mean())
     est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
     rejected = prep.all_obs.rejected
     est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
+    t = time.perf_counter()
     est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
+    est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
+                           "total": time.perf_counter() - t0}
     est.face_stats = {**est.face_stats, **stats}
     est.info["warnings"] = trust.warnings_for(est)
     return est

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -50,6 +50,9 @@ class Prepared:
     c_matrix: np.ndarray
     d_rows: np.ndarray
     timings: dict = field(default_factory=dict)
+    # the last light's projections (shading, gloss): a streamed problem's cost one full pass over
+    # the rows each, and the solve and the trust diagnostics ask for the same light
+    _projections: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def streamed(self) -> bool:
@@ -82,36 +85,41 @@ class Prepared:
         """(F, C) C_i . x of every face under the light unknown ``light`` (M, C)."""
         if not self.streamed:
             return self.c_matrix @ light
-        f = self.data.mesh.num_faces
-        return np.concatenate([self.diffuse_rows(np.arange(s, min(s + ROW_CHUNK, f))) @ light
-                               for s in range(0, f, ROW_CHUNK)])
+        return self._projection("shading", light, self.data.mesh.num_faces,
+                                lambda part: self.diffuse_rows(part) @ light)
 
     def gloss(self, light: np.ndarray) -> np.ndarray:
         """(N, C) D_k . x of every kept observation under the light unknown ``light`` (M, C)."""
         if not self.streamed:
             return self.d_rows @ light
-        n = len(self.obs.face)
-        return np.concatenate([self.specular_rows(np.arange(s, min(s + ROW_CHUNK, n))) @ light
-                               for s in range(0, n, ROW_CHUNK)])
+        return self._projection("gloss", light, len(self.obs.face), lambda part: self.specular_rows(part) @ light)
+
+    def _projection(self, kind: str, light: np.ndarray, count: int, rows_times_light) -> np.ndarray:
+        """A streamed projection, in chunks of :data:`ROW_CHUNK` rows; the last light's is kept."""
+        key = (light.shape, light.tobytes())
+        cached = self._projections.get(kind)
+        if cached is None or cached[0] != key:
+            value = np.concatenate([rows_times_light(np.arange(s, min(s + ROW_CHUNK, count)))
+                                    for s in range(0, count, ROW_CHUNK)])
+            self._projections[kind] = cached = (key, value)
+        return cached[1]
 
     def face_subset(self, faces: np.ndarray) -> "Prepared":
         """The problem restricted to ``faces`` (S,) (sorted, unique), renumbered 0..S-1,
         with its rows held: a light solved on it is a light of the whole problem."""
         mapping = np.full(self.obs.num_faces, -1, dtype=np.int64)
         mapping[faces] = np.arange(len(faces))
-        rows = np.nonzero(mapping[self.obs.face] >= 0)[0]
-        sub = self.obs.subset(mapping[self.obs.face] >= 0)
-        sub = Observations(mapping[sub.face], sub.rgb, sub.view_dir, len(faces), sub.num_views, sub.rejected,
-                           sub.view)
-        return Prepared(self.data, self.config, self.model, self.caster, self.sampling, self.visibility,
-                        self.all_obs, sub, self.diffuse_rows(faces), self.specular_rows(rows), dict(self.timings))
+        keep = mapping[self.obs.face] >= 0
+        sub = self.obs.subset(keep)
+        return replace(self, obs=replace(sub, face=mapping[sub.face], num_faces=len(faces)),
+                       c_matrix=self.diffuse_rows(faces), d_rows=self.specular_rows(np.nonzero(keep)[0]),
+                       timings=dict(self.timings))
 
     def projected(self, light: np.ndarray) -> "Prepared":
         """The same observations with the light fixed to ``light`` (M, 3): each row becomes
         its three per-channel projections (C_i . x, D_k . x), so a solve with the light
         fixed to the identity (3, 3) gives the albedos under ``light`` in O(N) memory."""
-        return Prepared(self.data, self.config, self.model, self.caster, self.sampling, self.visibility,
-                        self.all_obs, self.obs, self.shading(light), self.gloss(light), dict(self.timings))
+        return replace(self, c_matrix=self.shading(light), d_rows=self.gloss(light), timings=dict(self.timings))
 
 
 def _model_matrices(data: MultiViewData, model: ReflectionModel, sampling: SphereSampling,
