@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import coat, indirect, retinex, robust, sh, trust
+from . import coat, indirect, pose, retinex, robust, sh, trust
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
@@ -658,6 +658,13 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     config = config or EstimatorConfig()
     cls = get_method(method or DEFAULT_METHOD)
     t0 = time.perf_counter()
+    poses = None
+    if config.pose_rounds > 0:
+        fixed = replace(config, pose_rounds=0)
+        data, poses = pose.refine_poses(
+            data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates),
+            config.pose_rounds, min(config.pose_folds, len(data.views)), config.variant, log)
+    pose_seconds = time.perf_counter() - t0
     prep = prepare(data, config, log, cls.name, cls.streams)
     if not np.any(prep.obs.rgb > 0):
         raise InputError("every observed pixel is black or negative: there is no light to estimate from "
@@ -683,6 +690,9 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
     est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
                            "total": time.perf_counter() - t0}
+    if poses is not None:
+        est.info["timings"]["pose_refinement"] = pose_seconds
+        est.info["poses"] = poses
     est.face_stats = {**est.face_stats, **stats}
     est.info["warnings"] = trust.warnings_for(est)
     return est

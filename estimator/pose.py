@@ -1,0 +1,264 @@
+"""Per-view pose refinement: small rotation and translation updates of each training camera
+that align its image with the image the estimate predicts for it, the mesh held fixed.
+
+The surface points seen through a view's covered pixels carry the predicted radiance
+(:class:`estimator.forward.Predictor`, at the current pose). A pose update moves where those
+points project; the update minimises the difference between the observed image sampled
+there and the prediction (direct photometric alignment, Lucas-Kanade on the rigid motion):
+
+    E(xi) = sum_p rho( I(pi(T(xi)^-1 P_p)) - r_p ),
+
+with P_p a point in the camera frame, T(xi) = [R(omega) t; 0 1] applied on the right of the
+camera-to-world matrix (so ``omega`` turns the camera about its own centre and ``t`` moves it
+in its own frame), rho the Cauchy loss and I the observed image. Gauss-Newton steps with
+Levenberg-Marquardt damping run from coarse to fine: both images are blurred by a Gaussian
+of each scale in turn, so an error of several pixels lies inside the first scale's basin.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from .camera import Camera
+from .data import Estimate, MultiViewData, View
+from .errors import InputError
+from .forward import Predictor
+from .raycast import RayCaster
+from .robust import TUNING, irls_weights, robust_scale
+
+# Gaussian sigmas (pixels) of the coarse-to-fine levels; 2 degrees at a 256-pixel, 40-degree
+# view is about 13 pixels, inside the first level's basin
+POSE_SCALES = (8.0, 4.0, 2.0, 1.0)
+SILHOUETTE_SCALES = (16.0, 8.0, 4.0, 2.0)   # the first, silhouette-only move
+POSE_ROUNDS = 2          # alignment rounds against held-out estimates
+POSE_FOLDS = 4           # view groups per round
+POSE_STEPS = 10          # Gauss-Newton steps per level
+POSE_MIN_GAIN = 1e-4     # a level stops when a step lowers the cost by less than this share
+POSE_MIN_POINTS = 200    # a view with fewer covered pixels keeps its pose
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """(3,) -> (3, 3) cross-product matrix, skew(a) @ b = a x b."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rigid_update(delta: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """(4, 4) camera-frame motion of ``delta`` = (omega (3,) radians, Rodrigues; t (3,)): a
+    turn by R(omega) about ``pivot`` (3,), then a shift by t: [R, t + pivot - R pivot; 0 1]."""
+    omega, t = np.asarray(delta[:3], dtype=np.float64), np.asarray(delta[3:], dtype=np.float64)
+    angle = np.linalg.norm(omega)
+    k = skew(omega / angle) if angle > 0 else np.zeros((3, 3))
+    m = np.eye(4)
+    m[:3, :3] = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    m[:3, 3] = t + pivot - m[:3, :3] @ pivot
+    return m
+
+
+def projection_jacobian(points: np.ndarray, pivot: np.ndarray, fx: float, fy: float) -> np.ndarray:
+    """d(pixel)/d(delta) at delta = 0 for camera-frame points (OpenGL: looks down -Z) under
+    :func:`rigid_update` about ``pivot`` (3,).
+
+    Parameters
+    ----------
+    points : (N, 3) camera-frame positions (z < 0 in front).
+
+    Returns
+    -------
+    (N, 2, 6): columns omega (radians) then t (world units), rows (column, row) pixels.
+    """
+    x, y, depth = points[:, 0], points[:, 1], -points[:, 2]
+    du = np.stack([fx / depth, np.zeros_like(depth), fx * x / depth ** 2], axis=1)   # d(column)/dP'
+    dv = np.stack([np.zeros_like(depth), -fy / depth, -fy * y / depth ** 2], axis=1)  # d(row)/dP'
+    # P' = R^T (P - pivot - t) + pivot: dP'/domega = skew(P - pivot), dP'/dt = -I, and
+    # g^T skew(q) = (g x q)^T for any gradient row g
+    q = points - pivot
+    return np.stack([np.concatenate([np.cross(du, q), -du], axis=1),
+                     np.concatenate([np.cross(dv, q), -dv], axis=1)], axis=1)
+
+
+def _sample(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Bilinear samples (N, C) of ``image`` (H, W, C) at continuous pixel coordinates (N, 2)
+    (pixel centres at half-integers; clamped at the border)."""
+    height, width = image.shape[:2]
+    x = np.clip(xy[:, 0] - 0.5, 0.0, width - 1.0)
+    y = np.clip(xy[:, 1] - 0.5, 0.0, height - 1.0)
+    x0 = np.minimum(x.astype(np.int64), max(width - 2, 0))
+    y0 = np.minimum(y.astype(np.int64), max(height - 2, 0))
+    x1, y1 = np.minimum(x0 + 1, width - 1), np.minimum(y0 + 1, height - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    top = (1.0 - fx) * image[y0, x0] + fx * image[y0, x1]
+    bottom = (1.0 - fx) * image[y1, x0] + fx * image[y1, x1]
+    return (1.0 - fy) * top + fy * bottom
+
+
+def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
+    return gaussian_filter(image.astype(np.float32), sigma=(sigma, sigma, 0), mode="constant")
+
+
+def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray, camera: Camera,
+           steps: int, free: np.ndarray) -> tuple[Camera, float, float]:
+    """Damped Gauss-Newton alignment at one level of the parameters where ``free`` (6,) bool
+    is set; returns (camera, cost before, cost after)."""
+    grad_row, grad_col = np.gradient(observed, axis=(0, 1))
+    gradients = np.concatenate([grad_col, grad_row], axis=2)        # (H, W, 2C)
+    channels = observed.shape[2]
+    scale = max(float(np.median(np.abs(template))), 1e-6)
+
+    def residual(cam: Camera):
+        xy, depth = cam.project(points_world)
+        inside = (depth > 0) & (xy[:, 0] >= 0) & (xy[:, 0] <= cam.width) & (xy[:, 1] >= 0) & (xy[:, 1] <= cam.height)
+        r = np.where(inside[:, None], _sample(observed, xy) - template, 0.0) / scale
+        return r, xy, inside
+
+    pivot_world = points_world.mean(axis=0)   # the camera turns about the seen surface's centre
+    cam, damping = camera, 1e-3
+    r, xy, inside = residual(cam)
+    spread = robust_scale(np.linalg.norm(r[inside], axis=1))   # fixed for the level: one cost throughout
+
+    def cost(r):   # the Cauchy loss whose IRLS weights are used below
+        return float(np.sum(np.log1p((np.linalg.norm(r, axis=1) / (TUNING["cauchy"] * spread)) ** 2)))
+
+    first = current = cost(r)
+    for _ in range(steps):
+        w2c = np.linalg.inv(cam.c2w)
+        p_cam = points_world @ w2c[:3, :3].T + w2c[:3, 3]
+        pivot = w2c[:3, :3] @ pivot_world + w2c[:3, 3]
+        j_pix = projection_jacobian(p_cam, pivot, cam.fx, cam.fy)                      # (N, 2, 6)
+        g = _sample(gradients, xy).reshape(-1, 2, channels)                     # (N, 2, C)
+        jac = (g[:, 0, :, None] * j_pix[:, 0, None, :] + g[:, 1, :, None] * j_pix[:, 1, None, :]) / scale
+        w = irls_weights(np.linalg.norm(r, axis=1), "cauchy", spread) * inside
+        jac = jac.reshape(-1, 6)[:, free]
+        w, rr = np.repeat(w, channels), r.reshape(-1)
+        normal = jac.T @ (jac * w[:, None])
+        rhs = -jac.T @ (w * rr)
+        while damping < 1e8:
+            delta = np.zeros(6)
+            delta[free] = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), rhs)
+            trial = dataclasses.replace(cam, c2w=cam.c2w @ rigid_update(delta, pivot))
+            r_t, xy_t, inside_t = residual(trial)
+            if cost(r_t) < current:
+                gain = 1.0 - cost(r_t) / current
+                cam, r, xy, inside, current = trial, r_t, xy_t, inside_t, cost(r_t)
+                damping = max(damping / 3.0, 1e-6)
+                break
+            damping *= 10.0
+        else:
+            break
+        if gain < POSE_MIN_GAIN:
+            break
+    return cam, first, current
+
+
+def _refine(view: View, caster: RayCaster, predictor: Predictor | None, scales: tuple[float, ...],
+            steps: int, free: np.ndarray) -> tuple[Camera, dict]:
+    """One view's camera aligned from coarse to fine: the prediction and the silhouette
+    against the image and its alpha (``predictor`` given), or the silhouette alone."""
+    cam = view.camera
+    info = {"pixels": 0, "cost": [0.0, 0.0]}
+    # the surface points and their predicted radiance, at the starting pose: a pose error of a
+    # few pixels barely changes what a point looks like, only where it lands
+    origins, dirs = cam.pixel_rays()
+    face, t = caster.first_hits(origins, dirs)
+    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predictor is None and view.alpha is None):
+        return cam, info
+    coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
+    if predictor is None:
+        predicted, seen = coverage, view.alpha[..., None]
+    else:
+        predicted = predictor.predict(cam)[0]
+        seen = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
+        if view.alpha is not None:   # the silhouette as one more channel, at the colours' level
+            level = float(np.median(np.linalg.norm(predicted.reshape(-1, 3)[face >= 0], axis=1)))
+            predicted = np.concatenate([predicted, level * coverage], axis=2)
+            seen = np.concatenate([seen, level * view.alpha[..., None]], axis=2)
+    rows, cols = np.divmod(np.arange(len(face)), cam.width)
+    for sigma in scales:
+        stride = max(1, int(sigma // 2))   # a blurred level needs fewer samples
+        covered = np.nonzero((face >= 0) & (rows % stride == 0) & (cols % stride == 0))[0]
+        points = origins[covered] + t[covered, None] * dirs[covered]
+        template = _blur(predicted, sigma).reshape(-1, predicted.shape[2])[covered]
+        cam, before, after = _align(_blur(seen, sigma), template, points, cam, steps, free)
+        info["pixels"], info["cost"] = int(len(covered)), [before, after]
+    return cam, info
+
+
+def refine_view(view: View, predictor: Predictor, scales: tuple[float, ...] = POSE_SCALES,
+                steps: int = POSE_STEPS) -> tuple[Camera, dict]:
+    """One view's camera (all 6 degrees of freedom) aligned with ``predictor``'s image of it.
+
+    Returns
+    -------
+    camera : the refined Camera (the input one when too few pixels are covered).
+    info : dict with 'pixels' used and 'cost' (robust cost before and after, finest level).
+    """
+    return _refine(view, predictor.caster, predictor, scales, steps, np.ones(6, dtype=bool))
+
+
+def centre_view(view: View, caster: RayCaster, scales: tuple[float, ...] = SILHOUETTE_SCALES,
+                steps: int = POSE_STEPS) -> Camera:
+    """One view's camera moved (no turn) so the mesh's silhouette matches the view's alpha:
+    the pose error that shifts the whole object, found without any estimate. Views without
+    alpha keep their camera."""
+    free = np.array([False, False, False, True, True, True])
+    return _refine(view, caster, None, scales, steps, free)[0]
+
+
+def pose_change(before: Camera, after: Camera) -> dict:
+    """{'rotation_deg', 'translation'} of the motion from ``before`` to ``after``."""
+    correction = np.linalg.inv(before.c2w) @ after.c2w
+    cos = np.clip(0.5 * (np.trace(correction[:3, :3]) - 1.0), -1.0, 1.0)
+    return {"rotation_deg": float(np.degrees(np.arccos(cos))),
+            "translation": float(np.linalg.norm(after.center - before.center))}
+
+
+def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate], rounds: int = POSE_ROUNDS,
+                 folds: int = POSE_FOLDS, variant: str | None = None, log=None
+                 ) -> tuple[MultiViewData, list[dict]]:
+    """Every training view's camera refined, the mesh and images kept.
+
+    First each camera is moved so the silhouette matches the view's alpha. Then, ``rounds``
+    times, the views are split into ``folds`` interleaved groups; each group is aligned with
+    the image predicted by ``solve`` on the other groups, so a view is never pulled toward an
+    estimate that already holds its own misregistered pixels.
+
+    Parameters
+    ----------
+    solve : MultiViewData -> Estimate (the method that will run on the refined data).
+    rounds, folds : alignment rounds, and view groups per round (at least 2, at most the
+        number of views).
+
+    Returns
+    -------
+    data : the data with the refined cameras.
+    info : one dict per view: 'name', 'rotation_deg' and 'translation' (world units) of the
+        correction, 'c2w' (4x4 list), 'pixels' and 'cost' of the last alignment.
+    """
+    n = len(data.views)
+    if n < 2:
+        raise InputError(f"pose refinement needs at least 2 training views (each is aligned against an estimate "
+                         f"from the others), got {n}")
+    if rounds < 1:
+        raise InputError(f"pose refinement needs at least 1 round, got {rounds}")
+    if not 2 <= folds <= n:
+        raise InputError(f"pose refinement splits the views into 2 to {n} groups (one view group is aligned "
+                         f"against an estimate from the others); got {folds}")
+    caster = RayCaster(data.mesh, variant)
+    views = [dataclasses.replace(v, camera=centre_view(v, caster)) for v in data.views]
+    last = [{"pixels": 0, "cost": [0.0, 0.0]}] * n
+    for r in range(rounds):
+        for k in range(folds):
+            held = [i for i in range(n) if i % folds == k]
+            predictor = Predictor(data.mesh, solve(dataclasses.replace(data, views=[
+                v for i, v in enumerate(views) if i % folds != k])))
+            for i in held:
+                cam, last[i] = refine_view(views[i], predictor)
+                views[i] = dataclasses.replace(views[i], camera=cam)
+        if log:
+            moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
+            log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg")
+    info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), **extra}
+            for v, w, extra in zip(data.views, views, last)]
+    return dataclasses.replace(data, views=views), info
