@@ -694,7 +694,10 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         est.info["timings"]["pose_refinement"] = pose_seconds
         est.info["poses"] = poses
     est.face_stats = {**est.face_stats, **stats}
-    est.info["warnings"] = trust.warnings_for(est)
+    est.info["warnings"] = trust.warnings_for(est) + [
+        f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
+        f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
+        if p["diverged"]]
     return est
 
 

@@ -36,6 +36,8 @@ SILHOUETTE_SCALES = (16.0, 8.0, 4.0, 2.0)   # the first, silhouette-only move
 POSE_ROUNDS = 2          # alignment rounds against held-out estimates
 POSE_FOLDS = 4           # view groups per round
 POSE_STEPS = 10          # Gauss-Newton steps per level
+POSE_MAX_DEGREES = 10.0  # a correction beyond this turn, or beyond POSE_MAX_SHIFT x the distance to
+POSE_MAX_SHIFT = 0.25    # the mesh, is a divergence (against a poor estimate), not a calibration error
 POSE_MIN_GAIN = 1e-4     # a level stops when a step lowers the cost by less than this share
 POSE_MIN_POINTS = 200    # a view with fewer covered pixels keeps its pose
 
@@ -214,6 +216,14 @@ def pose_change(before: Camera, after: Camera) -> dict:
             "translation": float(np.linalg.norm(after.center - before.center))}
 
 
+def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
+    """Whether ``after`` lies within :data:`POSE_MAX_DEGREES` and :data:`POSE_MAX_SHIFT` x the
+    distance to ``centre`` (3,) of ``before``."""
+    change = pose_change(before, after)
+    return (change["rotation_deg"] <= POSE_MAX_DEGREES
+            and change["translation"] <= POSE_MAX_SHIFT * np.linalg.norm(before.center - centre))
+
+
 def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate], rounds: int = POSE_ROUNDS,
                  folds: int = POSE_FOLDS, variant: str | None = None, log=None
                  ) -> tuple[MultiViewData, list[dict]]:
@@ -230,11 +240,15 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
     rounds, folds : alignment rounds, and view groups per round (at least 2, at most the
         number of views).
 
+    A view whose correction grows beyond :func:`plausible` goes back to its silhouette-only
+    pose (and is marked 'diverged'): it was pulled by a poor estimate, not by its pixels.
+
     Returns
     -------
     data : the data with the refined cameras.
     info : one dict per view: 'name', 'rotation_deg' and 'translation' (world units) of the
-        correction, 'c2w' (4x4 list), 'pixels' and 'cost' of the last alignment.
+        correction, 'c2w' (4x4 list), 'diverged' (bool), 'pixels' and 'cost' of the last
+        alignment.
     """
     n = len(data.views)
     if n < 2:
@@ -246,7 +260,9 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
         raise InputError(f"pose refinement splits the views into 2 to {n} groups (one view group is aligned "
                          f"against an estimate from the others); got {folds}")
     caster = RayCaster(data.mesh, variant)
-    views = [dataclasses.replace(v, camera=centre_view(v, caster)) for v in data.views]
+    centre = 0.5 * (data.mesh.vertices.min(axis=0) + data.mesh.vertices.max(axis=0))
+    centred = [dataclasses.replace(v, camera=centre_view(v, caster)) for v in data.views]
+    views, diverged = list(centred), [False] * n
     last = [{"pixels": 0, "cost": [0.0, 0.0]}] * n
     for r in range(rounds):
         for k in range(folds):
@@ -255,10 +271,11 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
                 v for i, v in enumerate(views) if i % folds != k])))
             for i in held:
                 cam, last[i] = refine_view(views[i], predictor)
-                views[i] = dataclasses.replace(views[i], camera=cam)
+                diverged[i] = not plausible(data.views[i].camera, cam, centre)
+                views[i] = centred[i] if diverged[i] else dataclasses.replace(views[i], camera=cam)
         if log:
             moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
             log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg")
-    info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), **extra}
-            for v, w, extra in zip(data.views, views, last)]
+    info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), "diverged": bad,
+             **extra} for v, w, bad, extra in zip(data.views, views, diverged, last)]
     return dataclasses.replace(data, views=views), info

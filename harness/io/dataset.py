@@ -88,13 +88,14 @@ def write_dataset(folder: str, mesh: TriangleMesh, views: list[tuple[Camera, np.
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
         "camera_model": "PINHOLE",
-        "w": first.width, "h": first.height,
-        "fl_x": first.fx, "fl_y": first.fy, "cx": first.cx, "cy": first.cy,
-        "camera_angle_x": float(np.radians(first.fov_x_deg)),
         "mesh_file_path": "mesh.ply",
         "world_up": [0.0, 1.0, 0.0],
         "color_space": "linear_rec709",
         **(meta or {}),
+        # the cameras' own intrinsics win over any copied from another dataset's meta
+        "w": first.width, "h": first.height,
+        "fl_x": first.fx, "fl_y": first.fy, "cx": first.cx, "cy": first.cy,
+        "camera_angle_x": float(np.radians(first.fov_x_deg)),
         "frames": frames,
         "test_frames": test_frames,
     }

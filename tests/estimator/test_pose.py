@@ -8,7 +8,7 @@ from estimator.config import EstimatorConfig
 from estimator.errors import InputError
 from estimator.forward import Predictor
 from estimator.methods import estimate
-from estimator.pose import _sample, projection_jacobian, refine_poses, refine_view, rigid_update
+from estimator.pose import _sample, plausible, projection_jacobian, refine_poses, refine_view, rigid_update
 
 EARTH = EstimatorConfig(components="specular")
 
@@ -104,3 +104,13 @@ def test_pose_refinement_refuses_bad_settings(tiny_earth_data):
         refine_poses(data, solve, rounds=0)
     with pytest.raises(InputError, match="pose_folds"):
         EstimatorConfig(pose_folds=1)
+
+
+def test_a_far_correction_is_implausible():
+    cam = Camera.from_fov(look_at([0.0, 0.0, 4.0], [0.0, 0.0, 0.0]), 40.0, 64, 64)
+    centre = np.zeros(3)
+    turned = lambda deg: dataclasses.replace(  # noqa: E731
+        cam, c2w=cam.c2w @ rigid_update(np.array([0.0, np.radians(deg), 0.0, 0.0, 0.0, 0.0]), np.zeros(3)))
+    moved = lambda d: dataclasses.replace(cam, c2w=cam.c2w @ rigid_update(np.array([0, 0, 0, d, 0, 0.0]), np.zeros(3)))  # noqa: E731
+    assert plausible(cam, turned(9.0), centre) and not plausible(cam, turned(11.0), centre)
+    assert plausible(cam, moved(0.9), centre) and not plausible(cam, moved(1.1), centre)   # 0.25 x distance 4

@@ -142,6 +142,16 @@ def test_corrupt_dataset_applies_faults_to_a_copy(micro_pair, tmp_path):
     assert json.load(open(os.path.join(out, "transforms.json")))["faults"]["source"] == os.path.abspath(clean)
 
 
+def test_corrupt_dataset_writes_the_faulted_focal_length(micro_pair, tmp_path):
+    # regression: the source's fl_x/fl_y/camera_angle_x once overrode the faulted cameras
+    clean, _, _ = micro_pair
+    faults.corrupt_dataset(clean, str(tmp_path / "focal"), FaultSpec(focal_error=0.03))
+    a, b = read_dataset(clean), read_dataset(str(tmp_path / "focal"))
+    for u, v in zip(a.data.views + a.data.test_views, b.data.views + b.data.test_views):
+        assert v.camera.fx == pytest.approx(1.03 * u.camera.fx, rel=1e-9)
+        assert v.camera.fy == pytest.approx(1.03 * u.camera.fy, rel=1e-9)
+
+
 def test_generate_set_flag_adds_faults(tmp_path, capsys):
     from harness.cli.main import main
 
