@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import coat, indirect, pose, retinex, robust, sh, trust
+from . import albedo_prior, coat, indirect, pose, retinex, robust, sh, trust
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
@@ -172,7 +172,20 @@ class BilinearPerFace(Method):
     streams = True
 
     def solve(self, prep):
-        return self._solve_per_face(prep)
+        est = self._solve_per_face(prep)
+        width = self.config.albedo_prior
+        if width > 0:
+            diffuse_precision, specular_precision = trust.albedo_precision(prep, est)
+            edges = prep.data.mesh.face_adjacency
+            spreads = {}
+            for name, precision in (("diffuse", diffuse_precision), ("specular", specular_precision)):
+                if self.config.components in (name, "both"):
+                    smoothed, spread = albedo_prior.smooth_albedo(getattr(est, name), precision, edges,
+                                                                  est.observed, width)
+                    setattr(est, name, smoothed)
+                    spreads[name] = spread.tolist()
+            est.info["albedo_prior"] = {"width": width, "spread": spreads}
+        return est
 
 
 @register_method

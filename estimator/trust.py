@@ -73,8 +73,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     f = obs.num_faces
     residual, relative, shade = observation_residuals(prep, est)
     estimated = est.observed[obs.face]
-    scale = robust_scale(relative[estimated]) if estimated.any() else 0.0
-    outlier = relative > OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE)
+    scale, outlier = _outliers(relative, estimated)
     views = []
     view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
     for v in range(obs.num_views):
@@ -84,10 +83,8 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
                       "outlier_share": float(outlier[sel].mean()) if sel.any() else None,
                       "gross_share": float(np.mean(relative[sel] > GROSS_RESIDUAL)) if sel.any() else None})
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
-    sigma = 1.4826 * np.median(np.abs(residual[estimated]), axis=0) if estimated.any() else np.zeros(3)
-    info = np.stack([np.bincount(obs.face, shade[:, k] ** 2 * ~outlier, minlength=f) for k in range(3)], 1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        albedo_se = np.where(info > 0, sigma[None] / np.sqrt(info), np.inf)
+        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, residual, estimated, outlier))
         rel_se = np.linalg.norm(albedo_se, axis=1) / np.linalg.norm(est.diffuse + est.specular, axis=1)
     counts = np.bincount(obs.face, minlength=f)
     good = est.observed & np.isfinite(rel_se)
@@ -104,6 +101,34 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
         "views": views,
     }
     return summary, {"observations": counts.astype(np.int64), "albedo_se": albedo_se}
+
+
+def _outliers(relative: np.ndarray, estimated: np.ndarray) -> tuple[float, np.ndarray]:
+    """(robust scale of the rows of estimated faces, (N,) bool outlier rows)."""
+    scale = robust_scale(relative[estimated]) if estimated.any() else 0.0
+    return scale, relative > OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE)
+
+
+def _precision(face: np.ndarray, num_faces: int, rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray,
+               outlier: np.ndarray) -> np.ndarray:
+    """(F, 3) precision of a per-face albedo with the light fixed: sum over its inlier rows of
+    rows^2 (rows (N, 3): the albedo's coefficient in each observation) / sigma^2, sigma the
+    robust noise level of the residuals (N, 3) per channel; 0 where a face has no row."""
+    sigma = 1.4826 * np.median(np.abs(residual[estimated]), axis=0) if estimated.any() else np.ones(3)
+    info = np.stack([np.bincount(face, rows[:, k] ** 2 * ~outlier, minlength=num_faces) for k in range(3)], 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.nan_to_num(info / np.maximum(sigma, 1e-300)[None] ** 2)
+
+
+def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 3) precisions of the diffuse and of the specular albedo of each face with the light
+    fixed (each as if the other were known), from the estimate's own residuals."""
+    residual, relative, shade = observation_residuals(prep, est)
+    estimated = est.observed[prep.obs.face]
+    _, outlier = _outliers(relative, estimated)
+    face, f = prep.obs.face, prep.obs.num_faces
+    return (_precision(face, f, shade, residual, estimated, outlier),
+            _precision(face, f, prep.gloss(est.light), residual, estimated, outlier))
 
 
 def _finite_or_none(value: float) -> float | None:
