@@ -120,7 +120,9 @@ def main() -> None:
         if args.refine_rounds and (name == "clean" or fault.pose_rotation > 0 or fault.focal_error):
             runs.append(("cauchy", args.refine_rounds))
         for loss, rounds in runs:
-            method, config = estimator_settings(ds.meta, None, {"robust_loss": loss, "pose_rounds": rounds})
+            # rows without refinement turn the automatic check off, to show the fault as given
+            method, config = estimator_settings(ds.meta, None, {"robust_loss": loss, "pose_rounds": rounds,
+                                                                "auto_pose": 1.0 if rounds else 0.0})
             t = time.perf_counter()
             est = estimate(ds.data, method, config)
             seconds = time.perf_counter() - t

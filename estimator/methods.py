@@ -15,6 +15,7 @@ from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
 from .models import reflection_model
 from .pipeline import Prepared, prepare, with_config
+from .raycast import RayCaster
 from .segmentation import albedo_features, group_quantile, segment
 from .solver import BilinearResult, solve_bilinear
 from .errors import InputError
@@ -671,12 +672,18 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     config = config or EstimatorConfig()
     cls = get_method(method or DEFAULT_METHOD)
     t0 = time.perf_counter()
-    poses = None
-    if config.pose_rounds > 0:
-        fixed = replace(config, pose_rounds=0)
+    poses, rounds, offsets = None, config.pose_rounds, None
+    if rounds == 0 and config.auto_pose > 0 and len(data.views) >= 2:
+        offsets = pose.outline_offsets(data, RayCaster(data.mesh, config.variant))
+        if np.nanmax(offsets, initial=0.0) > config.auto_pose:
+            rounds = pose.POSE_ROUNDS
+            if log:
+                log(f"a view's outline is {np.nanmax(offsets):.1f} px off its alpha: refining the poses")
+    if rounds > 0:
+        fixed = replace(config, pose_rounds=0, auto_pose=0.0)
         data, poses = pose.refine_poses(
             data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates),
-            config.pose_rounds, min(config.pose_folds, len(data.views)), config.variant, log)
+            rounds, min(config.pose_folds, len(data.views)), config.variant, log)
     pose_seconds = time.perf_counter() - t0
     prep = prepare(data, config, log, cls.name, cls.streams)
     if not np.any(prep.obs.rgb > 0):
@@ -703,11 +710,18 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
     est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
                            "total": time.perf_counter() - t0}
+    if offsets is not None:
+        est.info["outline_offsets_px"] = {v.name: (None if np.isnan(o) else float(o))
+                                          for v, o in zip(data.views, offsets)}
     if poses is not None:
         est.info["timings"]["pose_refinement"] = pose_seconds
         est.info["poses"] = poses
     est.face_stats = {**est.face_stats, **stats}
-    est.info["warnings"] = trust.warnings_for(est) + [
+    automatic = [] if poses is None or config.pose_rounds > 0 else [
+        f"poses refined automatically ({pose.POSE_ROUNDS} rounds): the alpha outline of "
+        f"{data.views[int(np.nanargmax(offsets))].name} lay {np.nanmax(offsets):.1f} px from the mesh's "
+        f"(auto_pose {config.auto_pose:g} px); the corrected cameras are in 'poses'"]
+    est.info["warnings"] = trust.warnings_for(est) + automatic + [
         f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]]
