@@ -25,6 +25,7 @@ CHI2_MEDIAN = 0.4549    # the median of a chi-square with 1 degree of freedom: m
 MIN_SPREAD = 0.02       # tau is at least this share of the channel's median albedo
 MIN_RELATIVE_SE = 1e-6  # precisions are capped at a standard error of this share of the median albedo
 ROUNDS = 5              # IRLS rounds
+RIDGE = 1e-9            # added to every precision (in units of the channel's level^-2)
 
 
 def smooth_albedo(albedo: np.ndarray, precision: np.ndarray, edges: np.ndarray, estimated: np.ndarray,
@@ -72,7 +73,10 @@ def smooth_albedo(albedo: np.ndarray, precision: np.ndarray, edges: np.ndarray, 
             d = x[i] - x[j]
             w = 1.0 / (tau2 * (1.0 + d * d / (width * width * tau2)))
             laplacian = sparse.csr_matrix((np.concatenate([w, w, -w, -w]), (rows, cols)), shape=(f, f))
-            system = sparse.diags(p + 1e-12 * cap) + laplacian
-            x, _ = cg(system, p * a, x0=x, rtol=1e-8, maxiter=500, M=sparse.diags(1.0 / system.diagonal()))
+            # a tiny ridge on every face, on both sides: it makes the system definite and keeps a
+            # face without data or edges where it is, without pulling anything toward 0
+            system = sparse.diags(p + RIDGE) + laplacian
+            x, _ = cg(system, (p + RIDGE) * a, x0=x, rtol=1e-8, maxiter=500,
+                      M=sparse.diags(1.0 / system.diagonal()))
         out[:, c] = np.where(estimated, level * x, out[:, c])
     return out, spread

@@ -125,6 +125,8 @@ class View:
             alpha = np.asarray(self.alpha, dtype=np.float32)
             if alpha.shape != rgb.shape[:2]:
                 raise InputError(f"view {self.name}: alpha shape {alpha.shape} != image {rgb.shape[:2]}")
+            if not np.all(np.isfinite(alpha)):
+                raise InputError(f"view {self.name}: alpha contains NaN or Inf pixels")
             object.__setattr__(self, "alpha", alpha)
 
 

@@ -8,9 +8,9 @@ there and the prediction (direct photometric alignment, Lucas-Kanade on the rigi
 
     E(xi) = sum_p rho( I(pi(T(xi)^-1 P_p)) - r_p ),
 
-with P_p a point in the camera frame, T(xi) = [R(omega) t; 0 1] applied on the right of the
-camera-to-world matrix (so ``omega`` turns the camera about its own centre and ``t`` moves it
-in its own frame), rho the Cauchy loss and I the observed image. Gauss-Newton steps with
+with P_p a point in the camera frame, T(xi) applied on the right of the camera-to-world
+matrix (:func:`rigid_update`: ``omega`` turns the camera about the centre of the surface it
+sees, ``t`` moves it in its own frame), rho the Cauchy loss and I the observed image. Gauss-Newton steps with
 Levenberg-Marquardt damping run from coarse to fine: both images are blurred by a Gaussian
 of each scale in turn, so an error of several pixels lies inside the first scale's basin.
 """
@@ -39,6 +39,8 @@ POSE_STEPS = 10          # Gauss-Newton steps per level
 POSE_MAX_DEGREES = 10.0  # a correction beyond this turn, or beyond POSE_MAX_SHIFT x the distance to
 POSE_MAX_SHIFT = 0.25    # the mesh, is a divergence (against a poor estimate), not a calibration error
 POSE_MIN_GAIN = 1e-4     # a level stops when a step lowers the cost by less than this share
+POSE_MIN_VIEWS = 3       # a held-out estimate from fewer views is too poor to align with
+POSE_LEVEL_POINTS = 10   # a blurred level with fewer sampled points is skipped
 POSE_MIN_POINTS = 200    # a view with fewer covered pixels keeps its pose
 
 
@@ -101,9 +103,10 @@ def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
 
 
 def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray, camera: Camera,
-           steps: int, free: np.ndarray) -> tuple[Camera, float, float]:
+           steps: int, free: np.ndarray, fallback: Camera | None = None) -> tuple[Camera, float, float]:
     """Damped Gauss-Newton alignment at one level of the parameters where ``free`` (6,) bool
-    is set; returns (camera, cost before, cost after)."""
+    is set, from ``camera`` or from ``fallback`` when that fits this level better (so the
+    result never fits worse than either); returns (camera, cost before, cost after)."""
     grad_row, grad_col = np.gradient(observed, axis=(0, 1))
     gradients = np.concatenate([grad_col, grad_row], axis=2)        # (H, W, 2C)
     channels = observed.shape[2]
@@ -123,6 +126,10 @@ def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray,
     def cost(r):   # the Cauchy loss whose IRLS weights are used below
         return float(np.sum(np.log1p((np.linalg.norm(r, axis=1) / (TUNING["cauchy"] * spread)) ** 2)))
 
+    if fallback is not None:
+        r_f, xy_f, inside_f = residual(fallback)
+        if cost(r_f) < cost(r):
+            cam, r, xy, inside = fallback, r_f, xy_f, inside_f
     first = current = cost(r)
     for _ in range(steps):
         w2c = np.linalg.inv(cam.c2w)
@@ -139,6 +146,9 @@ def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray,
         while damping < 1e8:
             delta = np.zeros(6)
             delta[free] = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), rhs)
+            if not np.all(np.isfinite(delta)):
+                damping *= 10.0
+                continue
             trial = dataclasses.replace(cam, c2w=cam.c2w @ rigid_update(delta, pivot))
             r_t, xy_t, inside_t = residual(trial)
             if cost(r_t) < current:
@@ -160,31 +170,44 @@ def _refine(view: View, caster: RayCaster, predictor: Predictor | None, scales: 
     against the image and its alpha (``predictor`` given), or the silhouette alone."""
     cam = view.camera
     info = {"pixels": 0, "cost": [0.0, 0.0]}
+    alpha = silhouette(view)
     # the surface points and their predicted radiance, at the starting pose: a pose error of a
     # few pixels barely changes what a point looks like, only where it lands
     origins, dirs = cam.pixel_rays()
     face, t = caster.first_hits(origins, dirs)
-    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predictor is None and view.alpha is None):
+    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predictor is None and alpha is None):
         return cam, info
     coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
     if predictor is None:
-        predicted, seen = coverage, view.alpha[..., None]
+        predicted, seen = coverage, alpha[..., None]
     else:
         predicted = predictor.predict(cam)[0]
         seen = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
-        if view.alpha is not None:   # the silhouette as one more channel, at the colours' level
+        if alpha is not None:   # the silhouette as one more channel, at the colours' level
             level = float(np.median(np.linalg.norm(predicted.reshape(-1, 3)[face >= 0], axis=1)))
             predicted = np.concatenate([predicted, level * coverage], axis=2)
-            seen = np.concatenate([seen, level * view.alpha[..., None]], axis=2)
+            seen = np.concatenate([seen, level * alpha[..., None]], axis=2)
     rows, cols = np.divmod(np.arange(len(face)), cam.width)
-    for sigma in scales:
+    for k, sigma in enumerate(scales):
         stride = max(1, int(sigma // 2))   # a blurred level needs fewer samples
         covered = np.nonzero((face >= 0) & (rows % stride == 0) & (cols % stride == 0))[0]
+        if len(covered) < POSE_LEVEL_POINTS:
+            continue
         points = origins[covered] + t[covered, None] * dirs[covered]
         template = _blur(predicted, sigma).reshape(-1, predicted.shape[2])[covered]
-        cam, before, after = _align(_blur(seen, sigma), template, points, cam, steps, free)
+        finest = k == len(scales) - 1   # the result must fit at least as well as the given pose
+        cam, before, after = _align(_blur(seen, sigma), template, points, cam, steps, free,
+                                    view.camera if finest else None)
         info["pixels"], info["cost"] = int(len(covered)), [before, after]
     return cam, info
+
+
+def silhouette(view: View) -> np.ndarray | None:
+    """The view's alpha (H, W) clipped to [0, 1] when it has a background (some pixel below
+    0.5); None otherwise: an alpha of ones (an opaque image) says nothing about the outline."""
+    if view.alpha is None or not np.any(view.alpha < 0.5):
+        return None
+    return np.clip(view.alpha, 0.0, 1.0)
 
 
 def refine_view(view: View, predictor: Predictor, scales: tuple[float, ...] = POSE_SCALES,
@@ -220,18 +243,19 @@ def outline_offsets(data: MultiViewData, caster: RayCaster) -> np.ndarray:
     """(V,) how far, in pixels, each view's alpha outline lies from the mesh's outline under
     its camera: pixels where exactly one of (pixel centre sees the mesh, alpha >= 0.5) holds,
     over the mesh outline's length in pixels (a disc shifted by s pixels gives about 0.64 s).
-    NaN for a view without alpha. Correct poses give 0.01-0.3 px (edge pixels split by the
+    NaN for a view without a usable alpha (:func:`silhouette`). Correct poses give 0.01-0.3 px (edge pixels split by the
     0.5 threshold); 0.5 degrees of jitter gives several pixels."""
     buffers = caster.face_id_buffers([v.camera for v in data.views])
     out = np.full(len(data.views), np.nan)
     for k, (view, buffer) in enumerate(zip(data.views, buffers)):
-        if view.alpha is None:
+        alpha = silhouette(view)
+        if alpha is None:
             continue
         covered = buffer >= 0
-        inner = (covered & np.roll(covered, 1, 0) & np.roll(covered, -1, 0)
-                 & np.roll(covered, 1, 1) & np.roll(covered, -1, 1))
+        padded = np.pad(covered, 1, mode="edge")   # the image border is not an outline
+        inner = (covered & padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:])
         outline = np.count_nonzero(covered & ~inner)
-        out[k] = np.count_nonzero(covered ^ (view.alpha >= 0.5)) / max(outline, 1)
+        out[k] = np.count_nonzero(covered ^ (alpha >= 0.5)) / max(outline, 1)
     return out
 
 
@@ -256,11 +280,15 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
     Parameters
     ----------
     solve : MultiViewData -> Estimate (the method that will run on the refined data).
-    rounds, folds : alignment rounds, and view groups per round (at least 2, at most the
-        number of views).
+    rounds : alignment rounds (at least 1).
+    folds : view groups per round (2 to the number of views). When an estimate from the
+        other groups would hold fewer than :data:`POSE_MIN_VIEWS` views, only the
+        silhouette step runs.
 
     A view whose correction grows beyond :func:`plausible` goes back to its silhouette-only
-    pose (and is marked 'diverged'): it was pulled by a poor estimate, not by its pixels.
+    pose, or to its given pose when that too is beyond it (and is marked 'diverged'): it was
+    pulled by a poor estimate, not by its pixels. Its 'pixels' and 'cost' then describe the
+    alignment that was thrown away.
 
     Returns
     -------
@@ -280,9 +308,17 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
                          f"against an estimate from the others); got {folds}")
     caster = RayCaster(data.mesh, variant)
     centre = 0.5 * (data.mesh.vertices.min(axis=0) + data.mesh.vertices.max(axis=0))
-    centred = [dataclasses.replace(v, camera=centre_view(v, caster)) for v in data.views]
+    centred = []
+    for v in data.views:
+        cam = centre_view(v, caster)
+        centred.append(dataclasses.replace(v, camera=cam if plausible(v.camera, cam, centre) else v.camera))
     views, diverged = list(centred), [False] * n
     last = [{"pixels": 0, "cost": [0.0, 0.0]}] * n
+    if n - -(-n // folds) < POSE_MIN_VIEWS:
+        rounds = 0
+        if log:
+            log(f"pose refinement: {n} views in {folds} groups leave under {POSE_MIN_VIEWS} views per held-out "
+                "estimate; only the silhouette step ran")
     for r in range(rounds):
         for k in range(folds):
             held = [i for i in range(n) if i % folds == k]

@@ -63,3 +63,11 @@ def test_albedo_prior_setting(tiny_earth_data):
     np.testing.assert_array_equal(on.diffuse, off.diffuse)            # the component not estimated stays 0
     moved = np.abs(on.specular - off.specular)[on.observed].max()
     assert 0 < moved                                                  # the prior did act
+
+
+def test_a_uniform_albedo_is_not_pulled_toward_zero():
+    # regression: a ridge once added to the diagonal alone shrank flat regions by p / (p + 1)
+    a = np.full((100, 3), 0.5)
+    for precision in (1.0, 4.0, 100.0):
+        smoothed, _ = smooth_albedo(a, np.full(a.shape, precision), chain(100), np.ones(100, bool), 2.0)
+        np.testing.assert_allclose(smoothed, 0.5, rtol=1e-6)

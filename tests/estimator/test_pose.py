@@ -123,3 +123,17 @@ def test_a_misplaced_outline_triggers_refinement(tiny_earth_data):
     assert est.info["timings"]["pose_refinement"] > 0
     clean = estimate(data, "bilinear-per-face", EARTH)
     assert "poses" not in clean.info and max(clean.info["outline_offsets_px"].values()) < 0.5
+
+
+def test_an_opaque_alpha_says_nothing_about_the_outline(tiny_earth_data):
+    from estimator.pose import outline_offsets
+    from estimator.raycast import RayCaster
+
+    data = tiny_earth_data.data
+    opaque = dataclasses.replace(data, views=[dataclasses.replace(v, alpha=np.ones_like(v.alpha))
+                                              for v in data.views[:3]])
+    assert np.all(np.isnan(outline_offsets(opaque, RayCaster(data.mesh))))
+    with pytest.raises(InputError, match="alpha contains NaN"):
+        bad = data.views[0].alpha.copy()
+        bad[5, 5] = np.nan
+        dataclasses.replace(data.views[0], alpha=bad)
