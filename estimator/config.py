@@ -129,9 +129,9 @@ class EstimatorConfig:
         where its own observations are weak (:mod:`estimator.albedo_prior`): an
         edge-preserving Cauchy prior on neighbour differences, this many times the data's
         own texture spread wide (0: off, the paper's per-face solve). 2 was chosen on
-        earth-specular (full size, within ±10 %): shot noise 10 % 0.896 -> 0.933, 20 % 0.711
-        -> 0.771, read noise 5 % 0.572 -> 0.608; clean unchanged at 0.980; read noise 10 % and
-        20 %, where the noise exceeds most pixels, lose 0.012 and 0.021 (width 4 lost 0.13).
+        earth-specular (full size, within ±10 %): shot noise 10 % 0.896 -> 0.934, 20 % 0.711
+        -> 0.768, read noise 5 % 0.572 -> 0.604; clean unchanged at 0.980; read noise 10 % and
+        20 %, where the noise exceeds most pixels, lose 0.006 and 0.027 (width 4 lost 0.13).
     pose_rounds, pose_folds : per-view pose refinement before the solve
         (:mod:`estimator.pose`): 0 rounds (the default) trusts the cameras; otherwise each
         camera first moves so the mesh's silhouette matches the view's alpha, then, each
