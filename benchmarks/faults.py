@@ -28,6 +28,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import numpy as np  # noqa: E402
 
 from estimator.methods import estimate  # noqa: E402
+from estimator.pose import reprojection_error  # noqa: E402
 from estimator.validation import cross_validate  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
@@ -56,12 +57,6 @@ CASES = [
     ("shot noise 10 %", FaultSpec(noise_shot=0.10 ** 2)),
     ("shot noise 20 %", FaultSpec(noise_shot=0.20 ** 2)),
 ]
-
-
-def reprojection_px(cameras: list, truth: list, points: np.ndarray) -> np.ndarray:
-    """(V,) RMS pixel distance between where each camera and its true pose project ``points``."""
-    return np.array([np.sqrt(np.mean(np.sum((a.project(points)[0] - b.project(points)[0]) ** 2, axis=1)))
-                     for a, b in zip(cameras, truth)])
 
 
 def sweep_html(rows: list[dict], path: str) -> None:
@@ -106,6 +101,7 @@ def main() -> None:
     if not os.path.isdir(clean):
         generate(load_spec(resolve_scene(args.scene), args.profile), clean)
     rows = []
+    true_cameras = [v.camera for v in read_dataset(clean, load_test=False, load_truth=False).data.views]
     wanted = None if args.cases is None else set(args.cases.split(","))
     for k, (name, fault) in enumerate(CASES):
         if wanted is not None and name not in wanted:
@@ -115,7 +111,6 @@ def main() -> None:
             corrupt_dataset(clean, folder, fault, seed=k)
         ds = read_dataset(folder, load_test=False, load_truth=False)
         truth = read_ground_truth(clean, ds.data.mesh.num_faces)
-        true_cameras = [v.camera for v in read_dataset(clean, load_test=False, load_truth=False).data.views]
         runs = [(loss, 0) for loss in args.losses.split(",")]
         if args.refine_rounds and (name == "clean" or fault.pose_rotation > 0 or fault.focal_error):
             runs.append(("cauchy", args.refine_rounds))
@@ -130,7 +125,7 @@ def main() -> None:
             cameras = [v.camera for v in ds.data.views]
             if rounds:
                 cameras = [dataclasses.replace(c, c2w=np.array(p["c2w"])) for c, p in zip(cameras, est.info["poses"])]
-            errors = reprojection_px(cameras, true_cameras, ds.data.mesh.vertices)
+            errors = reprojection_error(cameras, true_cameras, ds.data.mesh.vertices)
             row = {"fault": name, "loss": loss, "pose_rounds": rounds, "method": method, "seconds": seconds,
                    "within_10": score(ds, truth, est, config.components if config.components != "both"
                                       else "diffuse")["within_10"],

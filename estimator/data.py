@@ -87,6 +87,11 @@ class TriangleMesh:
         return np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
 
     @property
+    def bounds_centre(self) -> np.ndarray:
+        """(3,) centre of the axis-aligned bounding box."""
+        return 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+
+    @property
     def areas(self) -> np.ndarray:
         """(F,) face areas."""
         c = self.corners

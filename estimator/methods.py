@@ -673,8 +673,9 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     cls = get_method(method or DEFAULT_METHOD)
     t0 = time.perf_counter()
     poses, rounds, offsets = None, config.pose_rounds, None
+    caster = RayCaster(data.mesh, config.variant)   # one for the pose check, the refinement and the solve
     if rounds == 0 and config.auto_pose > 0 and len(data.views) >= 2:
-        offsets = pose.outline_offsets(data, RayCaster(data.mesh, config.variant))
+        offsets = pose.outline_offsets(data, caster)
         if np.nanmax(offsets, initial=0.0) > config.auto_pose:
             rounds = pose.POSE_ROUNDS
             if log:
@@ -683,9 +684,9 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         fixed = replace(config, pose_rounds=0, auto_pose=0.0)
         data, poses = pose.refine_poses(
             data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates),
-            rounds, min(config.pose_folds, len(data.views)), config.variant, log)
+            rounds, min(config.pose_folds, len(data.views)), caster, log)
     pose_seconds = time.perf_counter() - t0
-    prep = prepare(data, config, log, cls.name, cls.streams)
+    prep = prepare(data, config, log, cls.name, cls.streams, caster)
     if not np.any(prep.obs.rgb > 0):
         raise InputError("every observed pixel is black or negative: there is no light to estimate from "
                          "(check the images' exposure and sign)")

@@ -153,8 +153,9 @@ def with_config(prep: Prepared, config: EstimatorConfig) -> Prepared:
 
 
 def prepare(data: MultiViewData, config: EstimatorConfig, log=None, method: str | None = None,
-            streaming: bool = True) -> Prepared:
-    """Run the shared stages. ``log`` (optional callable) receives progress lines.
+            streaming: bool = True, caster: RayCaster | None = None) -> Prepared:
+    """Run the shared stages. ``log`` (optional callable) receives progress lines;
+    ``caster``: ray queries of ``data.mesh`` already built (None: built here).
 
     ``streaming`` False (a method that needs the rows held) refuses, before the shadow
     function is computed, a problem larger than ``config.dense_rows``; ``method`` names it
@@ -163,7 +164,7 @@ def prepare(data: MultiViewData, config: EstimatorConfig, log=None, method: str 
     say = log or (lambda message: None)
     timings = {}
     t = time.perf_counter()
-    caster = RayCaster(data.mesh, config.variant)
+    caster = caster or RayCaster(data.mesh, config.variant)
     all_obs = gather_observations(caster, data.views, config.min_pixels, config.min_coverage, config.pure_pixels,
                                   config.negative_tolerance)
     normals = data.mesh.face_normals

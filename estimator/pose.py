@@ -151,9 +151,10 @@ def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray,
                 continue
             trial = dataclasses.replace(cam, c2w=cam.c2w @ rigid_update(delta, pivot))
             r_t, xy_t, inside_t = residual(trial)
-            if cost(r_t) < current:
-                gain = 1.0 - cost(r_t) / current
-                cam, r, xy, inside, current = trial, r_t, xy_t, inside_t, cost(r_t)
+            c_t = cost(r_t)
+            if c_t < current:
+                gain = 1.0 - c_t / current
+                cam, r, xy, inside, current = trial, r_t, xy_t, inside_t, c_t
                 damping = max(damping / 3.0, 1e-6)
                 break
             damping *= 10.0
@@ -259,6 +260,14 @@ def outline_offsets(data: MultiViewData, caster: RayCaster) -> np.ndarray:
     return out
 
 
+def reprojection_error(cameras: list[Camera], truth: list[Camera], points: np.ndarray) -> np.ndarray:
+    """(V,) RMS distance in pixels between where each camera and its true pose project
+    ``points`` (N, 3): how far a refined pose is from the truth, in the unit that matters
+    (a turn about the object and a shift can nearly cancel, so degrees alone say little)."""
+    return np.array([np.sqrt(np.mean(np.sum((a.project(points)[0] - b.project(points)[0]) ** 2, axis=1)))
+                     for a, b in zip(cameras, truth)])
+
+
 def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
     """Whether ``after`` lies within :data:`POSE_MAX_DEGREES` and :data:`POSE_MAX_SHIFT` x the
     distance to ``centre`` (3,) of ``before``."""
@@ -268,7 +277,7 @@ def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
 
 
 def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate], rounds: int = POSE_ROUNDS,
-                 folds: int = POSE_FOLDS, variant: str | None = None, log=None
+                 folds: int = POSE_FOLDS, caster: RayCaster | None = None, log=None
                  ) -> tuple[MultiViewData, list[dict]]:
     """Every training view's camera refined, the mesh and images kept.
 
@@ -280,6 +289,7 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
     Parameters
     ----------
     solve : MultiViewData -> Estimate (the method that will run on the refined data).
+    caster : ray queries of ``data.mesh`` (None: built with the default variant).
     rounds : alignment rounds (at least 1).
     folds : view groups per round (2 to the number of views). When an estimate from the
         other groups would hold fewer than :data:`POSE_MIN_VIEWS` views, only the
@@ -306,8 +316,8 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
     if not 2 <= folds <= n:
         raise InputError(f"pose refinement splits the views into 2 to {n} groups (one view group is aligned "
                          f"against an estimate from the others); got {folds}")
-    caster = RayCaster(data.mesh, variant)
-    centre = 0.5 * (data.mesh.vertices.min(axis=0) + data.mesh.vertices.max(axis=0))
+    caster = caster or RayCaster(data.mesh)
+    centre = data.mesh.bounds_centre
     centred = []
     for v in data.views:
         cam = centre_view(v, caster)

@@ -26,13 +26,13 @@ def prediction_scores(est: Estimate, data: MultiViewData, indices: np.ndarray, a
     ``align``: each view's camera is first aligned with the prediction
     (:func:`estimator.pose.refine_view`), as when the run refined its own poses."""
     predictor = Predictor(data.mesh, est)
-    centre = 0.5 * (data.mesh.vertices.min(axis=0) + data.mesh.vertices.max(axis=0))
     out = []
     for i in indices:
         view = data.views[int(i)]
-        camera = refine_view(view, predictor)[0] if align else view.camera
-        if not plausible(view.camera, camera, centre):
-            camera = view.camera
+        camera = view.camera
+        if align:
+            aligned = refine_view(view, predictor)[0]
+            camera = aligned if plausible(view.camera, aligned, data.mesh.bounds_centre) else view.camera
         predicted, coverage = predictor.predict(camera)
         mask = (coverage > 0) & np.any(predicted > 0, axis=2)
         if view.alpha is not None:

@@ -33,7 +33,7 @@ def spherical_texture_average(mesh: TriangleMesh, texture: np.ndarray, samples_p
     bary = _barycentric_grid(samples_per_edge)                     # (S, 3)
     points = np.einsum("sk,fkd->fsd", bary, mesh.corners)            # (F, S, 3)
     if center is None:
-        center = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
+        center = mesh.bounds_centre
     dirs = (points - center).reshape(-1, 3)
     values = latlong.sample_bilinear(np.asarray(texture, dtype=np.float64), dirs)
     return values.reshape(mesh.num_faces, len(bary), -1).mean(axis=1)
@@ -90,8 +90,7 @@ def region_labels(mesh: TriangleMesh, rules: list[tuple[np.ndarray, list[tuple[f
     -------
     (F,) int64 index of the rule that won (0 when none matched).
     """
-    center = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
-    d = mesh.centroids - center
+    d = mesh.centroids - mesh.bounds_centre
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     labels = np.zeros(mesh.num_faces, dtype=np.int64)
     for index, (axis, ranges) in enumerate(rules):
