@@ -6,6 +6,9 @@ with interreflections) for several methods, at full size by default.
                                     [--methods NAME,...] [--scene real-light] [--profile tiny]
                                     [--set KEY=VALUE ...] [--name real_light]
 
+``--probes`` takes shipped probe names and ``sunsky`` / ``sunsky-low`` (Mitsuba's sun and
+sky, the sun 50 or 16 degrees high).
+
 Datasets are generated once into DIR (reused when present). Prints one row per
 (scene, material, probe, rotation, method): diffuse-albedo PSNR after a per-channel
 least-squares scale, share of faces within ±10 % (least-squares gauge, luminance), ARI,
@@ -47,6 +50,18 @@ def score(ds, truth, est, component: str = "diffuse") -> dict:
             "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}
 
 
+def light_overrides(probe: str) -> dict:
+    """Spec overrides of one light of the family: a shipped probe by name (an ``envmap``),
+    or ``sunsky`` (Mitsuba's Hosek-Wilkie sun and sky, the spec's sun direction) and
+    ``sunsky-low`` (a sun 15 degrees above the horizon)."""
+    if probe == "sunsky":
+        return {"illumination.type": "sunsky", "illumination.file": None}
+    if probe == "sunsky-low":
+        return {"illumination.type": "sunsky", "illumination.file": None, "illumination.to_sun": [0.8, 0.27, 0.53]}
+    ext = "hdr" if probe in ("grace", "uffizi") else "exr"
+    return {"illumination.file": f"assets/{probe}.{ext}"}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="out/bench-real-light")
@@ -71,10 +86,8 @@ def main() -> None:
                 name = f"{args.scene}-{material}-{probe}-{rotation:g}"
                 folder = os.path.join(args.out, name)
                 if not os.path.isdir(folder):
-                    ext = "hdr" if probe in ("grace", "uffizi") else "exr"
                     spec = load_spec(resolve_scene(args.scene), args.profile, {
-                        "material.model": material, "illumination.file": f"assets/{probe}.{ext}",
-                        "illumination.rotation": rotation})
+                        "material.model": material, "illumination.rotation": rotation, **light_overrides(probe)})
                     generate(spec, folder)
                 ds = read_dataset(folder, load_test=False, load_truth=False)
                 truth = read_ground_truth(folder, ds.data.mesh.num_faces)

@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import albedo_prior, coat, indirect, pose, retinex, robust, sh, trust
+from . import albedo_prior, coat, indirect, pose, retinex, robust, sh, sun, trust
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
@@ -564,15 +564,18 @@ class RetinexSegmented(Method):
             weight = weight * coat.admissible_scale(obs.rgb, weight * rows, c.coat_max_negative)
             coat_level = np.median(np.linalg.norm(weight * rows, axis=1))
             if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
-                est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)))
+                found = est.info["sun"] and sun.Sun(np.array(est.info["sun"]["direction"]),
+                                                    est.info["sun"]["cost_ratio"], 0)
+                est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), found)
             else:
                 weight = np.zeros(3)  # negligible: not applied
         est.info["coat_weight"] = weight.tolist()
         est.info["clustering_s"] = time.perf_counter() - t
         return est
 
-    def _fit(self, prep) -> Estimate:
-        """Steps 1-5 on the observations of ``prep``."""
+    def _fit(self, prep, found: sun.Sun | None = None) -> Estimate:
+        """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
+        (None: search for one when ``sun_min_gain`` < 1)."""
         c = self.config
         mesh, obs = prep.data.mesh, prep.obs
         f = mesh.num_faces
@@ -586,23 +589,35 @@ class RetinexSegmented(Method):
             fit["indirect"] = indirect.indirect_shading(prep.caster, prep.sampling, prep.visibility,
                                                         np.where(usable[:, None], radiance, 0.0))
         extra = fit.get("indirect", 0.0)
-        light, _ = retinex.log_shading_fit(radiance, prep.c_matrix, edges, usable, **fit)
-        albedo, lit = self._divide(prep, radiance, light, usable, extra)
+        columns = prep.c_matrix
+        if found is None and c.sun_min_gain < 1:
+            found = sun.find_sun(radiance, columns, edges, usable, mesh, prep.caster, prep.sampling.directions,
+                                 loss=self.loss)
+        if found is not None and found.cost_ratio <= 1 - c.sun_min_gain:
+            columns = np.hstack([columns, sun.sun_shading(mesh, prep.caster, found.direction)[:, None]])
+        light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
+        albedo, lit = self._divide(columns, radiance, light, usable, extra)
         labels, _ = segment(np.where(lit[:, None], albedo, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
         share = float(np.mean(labels[lit] >= 0))
         regions = int(labels.max()) + 1
         if regions and share >= c.retinex_min_uniform_share:
             labels = np.where(lit, labels, -1)
             for _ in range(2):  # the regions' fit; then faces near a region in albedo join it, and again
-                light, region_albedo = retinex.log_shading_fit(radiance, prep.c_matrix, edges, usable, labels,
+                light, region_albedo = retinex.log_shading_fit(radiance, columns, edges, usable, labels,
                                                                initial=light, **fit)
-                albedo, lit = self._divide(prep, radiance, light, usable, extra)
+                albedo, lit = self._divide(columns, radiance, light, usable, extra)
                 joined = BilinearSegmented._assign(labels, albedo, lit, edges, 2.5 * c.segment_threshold)
                 labels = np.where(lit & (joined < regions), joined, -1)
             tied = lit & (labels >= 0)
             albedo[tied] = region_albedo[labels[tied]]
         else:
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
+        m = prep.c_matrix.shape[1]
+        sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
+                                                "evaluations": found.evaluations, "used": columns.shape[1] > m}
+        if columns.shape[1] > m:   # the sun joins the reported light as a delta light in SH
+            sun_info["irradiance"] = light[m].tolist()
+            light = light[:m] + sh.project_directional(sh.order_of(m), found.direction[None, :], light[m:m + 1])
         dc = light[0].copy()
         light, albedo = light / dc, albedo * dc          # the unit-DC gauge (the indirect term fixed a scale)
         group = labels.copy()
@@ -618,6 +633,7 @@ class RetinexSegmented(Method):
         per_group = 2 if c.components == "both" else 1
         info = {"clusters": int(len(np.unique(group[observed]))), "uniform_regions": regions,
                 "uniform_share": share, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
+                "sun": sun_info,
                 "degrees_of_freedom": {"observations": int(3 * len(obs.face)),
                                        "unknowns": int(3 * (per_group * (regions + (~(labels >= 0) & observed).sum())
                                                             + light.shape[0] - 1))}}
@@ -626,10 +642,12 @@ class RetinexSegmented(Method):
                         self.model.pseudo_from_light(light), labels_out, observed, self.name, c, info,
                         light if self.model.light == "radiance" else None)
 
-    def _divide(self, prep, radiance, light, usable, extra=0.0) -> tuple[np.ndarray, np.ndarray]:
-        """(F, 3) radiance over the shading of ``light`` (plus an ``extra`` indirect shading),
+    @staticmethod
+    def _divide(columns, radiance, light, usable, extra=0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(F, 3) radiance over the shading ``columns @ light`` (columns (F, M'): the diffuse
+        matrix, and a sun's column when one was found; plus an ``extra`` indirect shading),
         and (F,) where that is an albedo: usable and lit above 2 % of the 95th-percentile shading."""
-        shade = prep.c_matrix @ light + extra
+        shade = columns @ light + extra
         lum = shade.mean(axis=1)
         level = max(float(np.percentile(lum[usable], 95)), 1e-30)
         lit = usable & np.all(shade > 0, axis=1) & (lum > 0.02 * level)

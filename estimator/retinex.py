@@ -28,8 +28,21 @@ from .segmentation import group_quantile
 
 
 def _degrees(m: int) -> np.ndarray:
-    order = int(round(np.sqrt(m))) - 1
-    return np.concatenate([np.full(2 * l + 1, l, dtype=float) for l in range(order + 1)])
+    """(m,) SH degree of each light column; columns past the last full order (a sun,
+    :mod:`estimator.sun`) get degree 0, so the ridge leaves them free."""
+    order = int(np.sqrt(m)) - 1
+    sh_part = np.concatenate([np.full(2 * l + 1, l, dtype=float) for l in range(order + 1)])
+    return np.concatenate([sh_part, np.zeros(m - len(sh_part))])
+
+
+def edge_residuals(radiance: np.ndarray, shading: np.ndarray, edges: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """(E', 3) log radiance ratio minus log shading ratio across the edges (E, 2) whose two
+    faces are usable ((F,) bool); radiance and shading (F, 3), positive where usable."""
+    pair = usable[edges[:, 0]] & usable[edges[:, 1]]
+    i, j = edges[pair, 0], edges[pair, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.log(radiance[i] / radiance[j]) - np.log(np.maximum(shading[i], 1e-300) / np.maximum(shading[j], 1e-300))
+    return ratio
 
 
 def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,
