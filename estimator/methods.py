@@ -615,11 +615,13 @@ class RetinexSegmented(Method):
         m = prep.c_matrix.shape[1]
         sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
                                                 "evaluations": found.evaluations, "used": columns.shape[1] > m}
+        irradiance = light[m:m + 1]
         if columns.shape[1] > m:   # the sun joins the reported light as a delta light in SH
-            sun_info["irradiance"] = light[m].tolist()
-            light = light[:m] + sh.project_directional(sh.order_of(m), found.direction[None, :], light[m:m + 1])
+            light = light[:m] + sh.project_directional(sh.order_of(m), found.direction[None, :], irradiance)
         dc = light[0].copy()
         light, albedo = light / dc, albedo * dc          # the unit-DC gauge (the indirect term fixed a scale)
+        if sun_info and sun_info["used"]:                # in the reported light's gauge
+            sun_info["irradiance"] = (irradiance[0] / dc).tolist()
         group = labels.copy()
         free = np.nonzero(group < 0)[0]
         group[free] = regions + np.arange(len(free))

@@ -5,6 +5,7 @@ import shutil
 import numpy as np
 import pytest
 
+from estimator import sh, sun
 from estimator.config import EstimatorConfig
 from estimator.methods import estimate
 from harness.io.dataset import read_dataset, read_ground_truth
@@ -103,6 +104,9 @@ def test_a_sun_is_found_and_drawn_with_its_shadows(tmp_path):
             assert found["used"] and found["cost_ratio"] < 0.9
             assert np.degrees(np.arccos(np.clip(np.dot(found["direction"], to_sun), -1, 1))) < 5.0
             assert np.all(np.array(found["irradiance"]) > 0)
+            # the reported light holds the sun as SH (irradiance x Y_lm in its unit-DC gauge)
+            brightest = sun.brightest_direction(est.light, sh.fibonacci_sphere(4000))
+            assert np.degrees(np.arccos(np.clip(brightest @ to_sun, -1, 1))) < 8.0
         else:
             assert est.info["sun"] is None
     # measured: 31.4 dB with the sun (found 1.0 deg off, cost ratio 0.81), 17.1 dB without
