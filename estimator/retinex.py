@@ -122,7 +122,7 @@ def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, los
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
-    for _ in range(iterations):
+    for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, i, j, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
         normal, gradient = np.zeros((n, n)), np.zeros(n)

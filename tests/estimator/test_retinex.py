@@ -82,3 +82,13 @@ def test_an_additive_indirect_shading_fixes_the_scale():
     radiance = albedo * (c_matrix @ light + extra)
     fit, _ = log_shading_fit(radiance, c_matrix, edges, np.ones(len(radiance), bool), indirect=extra)
     np.testing.assert_allclose(fit, light, rtol=1e-3, atol=1e-4)
+
+
+def test_a_dc_only_light_has_nothing_to_fit():
+    """One column (SH order 0, the gauge) and no regions: the light is the unit DC, with no
+    division by the empty system's size."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    with np.errstate(all="raise"):
+        fit, region_albedo = log_shading_fit(radiance, c_matrix[:, :1], edges, np.ones(len(radiance), dtype=bool))
+    np.testing.assert_array_equal(fit, np.ones((1, 3)))
+    assert region_albedo.shape == (0, 3)
