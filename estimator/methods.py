@@ -564,8 +564,9 @@ class RetinexSegmented(Method):
             weight = weight * coat.admissible_scale(obs.rgb, weight * rows, c.coat_max_negative)
             coat_level = np.median(np.linalg.norm(weight * rows, axis=1))
             if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
-                found = est.info["sun"] and sun.Sun(np.array(est.info["sun"]["direction"]),
-                                                    est.info["sun"]["cost_ratio"], 0)
+                s = est.info["sun"]
+                found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
+                                      c.coat_ior if s["through_coat"] else None)
                 est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), found)
             else:
                 weight = np.zeros(3)  # negligible: not applied
@@ -592,9 +593,9 @@ class RetinexSegmented(Method):
         columns = prep.c_matrix
         if found is None and c.sun_min_gain < 1:
             found = sun.find_sun(radiance, columns, edges, usable, mesh, prep.caster, prep.sampling.directions,
-                                 loss=self.loss)
+                                 loss=self.loss, coat_ior=c.coat_ior if c.coat_correction else None)
         if found is not None and found.cost_ratio <= 1 - c.sun_min_gain:
-            columns = np.hstack([columns, sun.sun_shading(mesh, prep.caster, found.direction)[:, None]])
+            columns = np.hstack([columns, sun.sun_shading(mesh, prep.caster, found.direction, found.coat_ior)[:, None]])
         light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
         albedo, lit = self._divide(columns, radiance, light, usable, extra)
         labels, _ = segment(np.where(lit[:, None], albedo, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
@@ -614,7 +615,8 @@ class RetinexSegmented(Method):
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
         m = prep.c_matrix.shape[1]
         sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
-                                                "evaluations": found.evaluations, "used": columns.shape[1] > m}
+                                                "evaluations": found.evaluations, "used": columns.shape[1] > m,
+                                                "through_coat": found.coat_ior is not None}
         irradiance = light[m:m + 1]
         if columns.shape[1] > m:   # the sun joins the reported light as a delta light in SH
             light = light[:m] + sh.project_directional(sh.order_of(m), found.direction[None, :], irradiance)

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import retinex, robust, sh
+from .coat import fresnel_dielectric
 from .data import TriangleMesh
 from .raycast import RayCaster
 
@@ -41,26 +42,31 @@ class Sun:
     direction : (3,) unit world direction towards the sun.
     cost_ratio : robust edge cost with the sun over the cost without it (< 1: it helps).
     evaluations : edge fits the search ran.
+    coat_ior : the index of the dielectric coat its light passes (None: a bare surface).
     """
 
     direction: np.ndarray
     cost_ratio: float
     evaluations: int
+    coat_ior: float | None = None
 
 
-def sun_shading(mesh: TriangleMesh, caster: RayCaster, direction: np.ndarray, points: int = SAMPLE_POINTS,
-                offset: float = 1e-4) -> np.ndarray:
+def sun_shading(mesh: TriangleMesh, caster: RayCaster, direction: np.ndarray, coat_ior: float | None = None,
+                points: int = SAMPLE_POINTS, offset: float = 1e-4) -> np.ndarray:
     """(F,) diffuse-matrix column of a unit-irradiance delta light from ``direction`` (3,):
     the cosine over pi times the share of ``points`` fixed barycentric sample points per
     face whose shadow ray (started ``offset`` x the bounding-box diagonal along the normal)
-    escapes."""
+    escapes; with ``coat_ior``, times the share 1 - F(n . d) that a dielectric coat of that
+    index lets through to the diffuse base (a plastic's coat reflects most of a grazing sun)."""
     d = np.asarray(direction, float) / np.linalg.norm(direction)
     bary = np.random.default_rng(0).dirichlet(np.ones(3), points)                 # (P, 3)
     starts = np.einsum("pk,fkj->fpj", bary, mesh.vertices[mesh.faces])            # (F, P, 3)
     normals = mesh.face_normals
     origins = (starts + offset * caster.scale * normals[:, None, :]).reshape(-1, 3)
     free = caster.first_hit_faces(origins, np.broadcast_to(d, origins.shape).copy()) < 0
-    return np.maximum(normals @ d, 0.0) * free.reshape(-1, points).mean(axis=1) / np.pi
+    cosine = np.maximum(normals @ d, 0.0)
+    through = 1.0 if coat_ior is None else 1.0 - fresnel_dielectric(cosine, coat_ior)
+    return cosine * through * free.reshape(-1, points).mean(axis=1) / np.pi
 
 
 def brightest_direction(light: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -73,7 +79,7 @@ def brightest_direction(light: np.ndarray, directions: np.ndarray) -> np.ndarray
 def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,
              mesh: TriangleMesh, caster: RayCaster, directions: np.ndarray, start: np.ndarray | None = None,
              order: int = 2, start_order: int = 4, steps_deg: tuple[float, ...] = SEARCH_STEPS_DEG,
-             iterations: int = 5, loss: str = "cauchy") -> Sun:
+             iterations: int = 5, loss: str = "cauchy", coat_ior: float | None = None) -> Sun:
     """The sun direction that best explains the log radiance ratios of neighbouring faces.
 
     Parameters
@@ -86,6 +92,11 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
     order : SH order of the sky during the search.
     steps_deg : angular steps of the pattern search (six neighbours on a ring), coarse to fine.
     iterations : Gauss-Newton steps of each edge fit (8 gave the same directions, 50 % slower).
+    coat_ior : also try the sun's light through a dielectric coat of this index
+        (:func:`sun_shading`): after the search with the bare column, the coated one is
+        tried there and, when it costs less, kept and refined at the finest step. (Choosing
+        the column at the start direction and searching with it sent two diffuse cases to
+        a coated optimum 21-33 dB where the bare one gave 38-64.)
 
     Returns
     -------
@@ -100,28 +111,42 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
     base = retinex.edge_residuals(radiance, low @ base_light, edges, usable)
     scale = np.array([robust.robust_scale(np.abs(base[:, c])) for c in range(3)])
 
-    def cost(d):
-        columns = np.hstack([low, sun_shading(mesh, caster, d)[:, None]])
+    def cost(d, ior):
+        columns = np.hstack([low, sun_shading(mesh, caster, d, ior)[:, None]])
         light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
         r = retinex.edge_residuals(radiance, columns @ light, edges, usable)
         return float(np.sum(np.log1p((r / scale) ** 2)))
 
     base_cost = float(np.sum(np.log1p((base / scale) ** 2)))
+
+    def descend(d, best, ior, steps):
+        """Pattern search from ``d``: move to the best of six neighbours on a ring while it
+        lowers the cost, then shrink the ring. Returns (direction, cost, evaluations)."""
+        evaluations = 0
+        for step in np.radians(steps):
+            moved = True
+            while moved:
+                u, v = _tangent_frame(d)
+                ring = [np.cos(step) * d + np.sin(step) * (np.cos(a) * u + np.sin(a) * v)
+                        for a in np.arange(6) * np.pi / 3]
+                costs = [cost(c, ior) for c in ring]
+                evaluations += len(ring)
+                k = int(np.argmin(costs))
+                moved = costs[k] < best
+                if moved:
+                    best, d = costs[k], ring[k] / np.linalg.norm(ring[k])
+        return d, best, evaluations
+
     d = np.asarray(start, float) / np.linalg.norm(start)
-    best, evaluations = cost(d), 1
-    for step in np.radians(steps_deg):
-        moved = True
-        while moved:
-            u, v = _tangent_frame(d)
-            ring = [np.cos(step) * d + np.sin(step) * (np.cos(a) * u + np.sin(a) * v)
-                    for a in np.arange(6) * np.pi / 3]
-            costs = [cost(c) for c in ring]
-            evaluations += len(ring)
-            k = int(np.argmin(costs))
-            moved = costs[k] < best
-            if moved:
-                best, d = costs[k], ring[k] / np.linalg.norm(ring[k])
-    return Sun(d, best / max(base_cost, 1e-300), evaluations)
+    d, best, evaluations = descend(d, cost(d, None), None, steps_deg)
+    ior, evaluations = None, evaluations + 1
+    if coat_ior is not None:   # the bare sun places the shadows; then the coat's column, refined at the finest step
+        coated = cost(d, coat_ior)
+        evaluations += 1
+        if coated < best:
+            d, best, more = descend(d, coated, coat_ior, steps_deg[-1:])
+            ior, evaluations = coat_ior, evaluations + more
+    return Sun(d, best / max(base_cost, 1e-300), evaluations, ior)
 
 
 def _tangent_frame(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from estimator import sh
+from estimator.coat import fresnel_dielectric
 from estimator.data import TriangleMesh
 from estimator.raycast import RayCaster
 from estimator.reflection import diffuse_matrix
@@ -101,3 +102,28 @@ def test_the_column_is_the_diffuse_rows_times_the_sun_as_sh():
     through_sh = c_matrix @ sh.project_directional(10, d[None, :], np.array([[2.0]]))
     exact = 2.0 * sun_shading(mesh, caster, d)
     assert np.abs(through_sh[:, 0] - exact).max() < 0.03 * exact.max()
+
+
+def test_through_a_coat_the_sun_loses_its_fresnel_reflection():
+    mesh = icosphere(2)
+    caster = RayCaster(mesh)
+    d = _unit([0.3, 0.8, -0.2])
+    bare, coated = sun_shading(mesh, caster, d), sun_shading(mesh, caster, d, coat_ior=1.5)
+    cosine = np.maximum(mesh.face_normals @ d, 0)
+    np.testing.assert_allclose(coated, bare * (1 - fresnel_dielectric(cosine, 1.5)), atol=1e-12)
+    facing = cosine > 0.99
+    np.testing.assert_allclose(coated[facing] / bare[facing], 0.96, atol=0.002)   # ((1.5 - 1) / 2.5)^2 = 0.04
+    grazing = (cosine > 0) & (cosine < 0.1)
+    assert np.all(coated[grazing] < 0.6 * bare[grazing])
+
+
+@pytest.mark.parametrize("coated", [False, True])
+def test_find_sun_tells_a_coated_surface_from_a_bare_one(scene, coated):
+    """Rendered with or without the coat's transmission, the search picks that column."""
+    mesh, caster, c_matrix, albedo, sky = scene
+    to_sun = _unit([0.5, 0.7, 0.3])
+    radiance = albedo * (c_matrix @ sky + 3.0 * sun_shading(mesh, caster, to_sun, 1.5 if coated else None)[:, None])
+    found = find_sun(radiance, c_matrix, mesh.face_adjacency, np.ones(mesh.num_faces, dtype=bool), mesh, caster,
+                     sh.fibonacci_sphere(500), coat_ior=1.5)
+    assert found.coat_ior == (1.5 if coated else None)
+    assert np.degrees(np.arccos(np.clip(found.direction @ to_sun, -1, 1))) < 2.0
