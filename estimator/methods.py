@@ -597,6 +597,9 @@ class RetinexSegmented(Method):
         if found is not None and found.cost_ratio <= 1 - c.sun_min_gain:
             columns = np.hstack([columns, sun.sun_shading(mesh, prep.caster, found.direction, found.coat_ior)[:, None]])
         light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
+        if columns.shape[1] > prep.c_matrix.shape[1] and np.any(light[-1] <= 0):   # no dark "sun"
+            columns = prep.c_matrix
+            light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
         albedo, lit = self._divide(columns, radiance, light, usable, extra)
         labels, _ = segment(np.where(lit[:, None], albedo, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
         share = float(np.mean(labels[lit] >= 0))
@@ -619,7 +622,8 @@ class RetinexSegmented(Method):
                                                 "through_coat": found.coat_ior is not None}
         irradiance = light[m:m + 1]
         if columns.shape[1] > m:   # the sun joins the reported light as a delta light in SH
-            light = light[:m] + sh.project_directional(sh.order_of(m), found.direction[None, :], irradiance)
+            light = light[:m] + self.model.unknown_from_radiance(
+                sh.project_directional(sh.order_of(m), found.direction[None, :], irradiance))
         dc = light[0].copy()
         light, albedo = light / dc, albedo * dc          # the unit-DC gauge (the indirect term fixed a scale)
         if sun_info and sun_info["used"]:                # in the reported light's gauge

@@ -79,6 +79,11 @@ class ReflectionModel(ABC):
         """The pseudo illumination h (M, C) from the light unknown (M, C)."""
         return light
 
+    def unknown_from_radiance(self, radiance: np.ndarray) -> np.ndarray:
+        """(M, C) the light unknown whose diffuse shading equals that of the radiance SH
+        ``radiance`` (M, C): ``diffuse_matrix @ result == paper diffuse rows @ radiance``."""
+        return radiance
+
     def known_light(self, pseudo: np.ndarray | None, radiance: np.ndarray | None) -> tuple[np.ndarray | None, str]:
         """The light unknown from a known pseudo illumination or radiance, and what it needs."""
         if self.light == "radiance":
@@ -121,10 +126,19 @@ class DefilteredModel(PaperModel):
 
     def diffuse_matrix(self, mesh, sampling, visibility, faces=None):
         c = self.config
+        return super().diffuse_matrix(mesh, sampling, visibility, faces) * self._gains()[None]
+
+    def unknown_from_radiance(self, radiance):
+        return radiance / self._gains()[: len(radiance), None]
+
+    def _gains(self) -> np.ndarray:
+        """((order + 1)^2,) the diffuse rows' per-coefficient gain: 1 / Phong filter up to
+        ``defilter_order``, 1 above."""
+        c = self.config
         gains = np.ones(self.order + 1)
         f = sh.phong_filter(self.order, c.phong_exponent)
         gains[: c.defilter_order + 1] = 1.0 / f[: c.defilter_order + 1]
-        return super().diffuse_matrix(mesh, sampling, visibility, faces) * sh.expand_per_degree(gains)[None]
+        return sh.expand_per_degree(gains)
 
     def mitsuba_material(self):
         return ReflectionModel.mitsuba_material(self)

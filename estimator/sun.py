@@ -31,6 +31,7 @@ from .raycast import RayCaster
 
 SAMPLE_POINTS = 6       # shadow rays per face for its lit share
 SEARCH_STEPS_DEG = (6.0, 3.0, 1.5)
+MAX_MOVES = 10          # per ring size: a flat cost (no sun) must not wander
 
 
 @dataclass(frozen=True)
@@ -59,14 +60,17 @@ def sun_shading(mesh: TriangleMesh, caster: RayCaster, direction: np.ndarray, co
     escapes; with ``coat_ior``, times the share 1 - F(n . d) that a dielectric coat of that
     index lets through to the diffuse base (a plastic's coat reflects most of a grazing sun)."""
     d = np.asarray(direction, float) / np.linalg.norm(direction)
-    bary = np.random.default_rng(0).dirichlet(np.ones(3), points)                 # (P, 3)
-    starts = np.einsum("pk,fkj->fpj", bary, mesh.vertices[mesh.faces])            # (F, P, 3)
     normals = mesh.face_normals
-    origins = (starts + offset * caster.scale * normals[:, None, :]).reshape(-1, 3)
-    free = caster.first_hit_faces(origins, np.broadcast_to(d, origins.shape).copy()) < 0
     cosine = np.maximum(normals @ d, 0.0)
+    facing = np.nonzero(cosine > 0)[0]                  # faces turned away need no shadow ray
+    bary = np.random.default_rng(0).dirichlet(np.ones(3), points)                           # (P, 3)
+    starts = np.einsum("pk,fkj->fpj", bary, mesh.vertices[mesh.faces[facing]])             # (F', P, 3)
+    origins = (starts + offset * caster.scale * normals[facing, None, :]).reshape(-1, 3)
+    lit = np.zeros(len(cosine))
+    lit[facing] = (caster.first_hit_faces(origins, np.broadcast_to(d, origins.shape).copy()) < 0
+                   ).reshape(-1, points).mean(axis=1)
     through = 1.0 if coat_ior is None else 1.0 - fresnel_dielectric(cosine, coat_ior)
-    return cosine * through * free.reshape(-1, points).mean(axis=1) / np.pi
+    return cosine * through * lit / np.pi
 
 
 def brightest_direction(light: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -100,7 +104,9 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
 
     Returns
     -------
-    Sun, with the cost ratio against the same fit without a sun (robust scales fixed by it).
+    Sun, with the cost ratio against the same fit without a sun: sum log(1 + (r / s)^2)
+    over the edge residuals r, with each channel's robust scale s fixed by the sunless fit.
+    A trial whose fitted sun irradiance is not positive in every channel costs infinity.
     """
     low = c_matrix[:, :sh.num_coeffs(order)]
     fit = dict(loss=loss, iterations=iterations)
@@ -114,6 +120,8 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
     def cost(d, ior):
         columns = np.hstack([low, sun_shading(mesh, caster, d, ior)[:, None]])
         light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
+        if np.any(light[-1] <= 0):      # a sun takes light away nowhere: a dark albedo patch is no sun
+            return np.inf
         r = retinex.edge_residuals(radiance, columns @ light, edges, usable)
         return float(np.sum(np.log1p((r / scale) ** 2)))
 
@@ -124,8 +132,9 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
         lowers the cost, then shrink the ring. Returns (direction, cost, evaluations)."""
         evaluations = 0
         for step in np.radians(steps):
-            moved = True
-            while moved:
+            moved, moves = True, 0
+            while moved and moves < MAX_MOVES:
+                moves += 1
                 u, v = _tangent_frame(d)
                 ring = [np.cos(step) * d + np.sin(step) * (np.cos(a) * u + np.sin(a) * v)
                         for a in np.arange(6) * np.pi / 3]

@@ -5,6 +5,8 @@ import pytest
 
 from estimator import sh
 from estimator.coat import fresnel_dielectric
+from estimator.config import EstimatorConfig
+from estimator.models import reflection_model
 from estimator.data import TriangleMesh
 from estimator.raycast import RayCaster
 from estimator.reflection import diffuse_matrix
@@ -74,7 +76,7 @@ def test_find_sun_recovers_the_direction_and_its_irradiance(scene):
     assert np.degrees(np.arccos(start @ to_sun)) > 8
     found = find_sun(radiance, c_matrix, mesh.face_adjacency, usable, mesh, caster, sh.fibonacci_sphere(500), start)
     assert np.degrees(np.arccos(np.clip(found.direction @ to_sun, -1, 1))) < 1.5
-    assert found.cost_ratio < 0.8 and found.evaluations >= 7          # the 2 % texture stays
+    assert found.cost_ratio < 0.8                                      # the 2 % texture stays
     columns = np.hstack([c_matrix, sun_shading(mesh, caster, found.direction)[:, None]])
     light, _ = log_shading_fit(radiance, columns, mesh.face_adjacency, usable)
     assert light.shape == (10, 3)
@@ -91,15 +93,20 @@ def test_no_sun_gives_no_gain(scene):
     assert found.cost_ratio > 0.9
 
 
-def test_the_column_is_the_diffuse_rows_times_the_sun_as_sh():
-    """Units: C @ (E Y(d)) (the sun projected to order 10 through the quadrature) matches
-    E x the sun's column on a convex object to within the truncation's ringing."""
+@pytest.mark.parametrize("model", [dict(), dict(diffuse_light="defiltered", defilter_order=2)])
+def test_the_column_is_the_diffuse_rows_times_the_sun_as_sh(model):
+    """Units: C @ x(E Y(d)) (the sun projected to order 10, in the model's light unknown,
+    through the quadrature) matches E x the sun's column on a convex object to within the
+    truncation's ringing, for the paper model and the defiltered one (whose rows carry
+    1 / Phong filter at the low degrees)."""
     mesh = icosphere(2)
     caster = RayCaster(mesh)
     sampling = sphere_sampling()
-    c_matrix = diffuse_matrix(mesh, sampling, compute_visibility(caster, sampling), 10)
+    reflection = reflection_model(EstimatorConfig(sh_order=10, **model))
+    assert reflection.name == ("defiltered" if model else "paper")
+    c_matrix = reflection.diffuse_matrix(mesh, sampling, compute_visibility(caster, sampling))
     d = _unit([0.2, 0.9, 0.4])
-    through_sh = c_matrix @ sh.project_directional(10, d[None, :], np.array([[2.0]]))
+    through_sh = c_matrix @ reflection.unknown_from_radiance(sh.project_directional(10, d[None, :], np.array([[2.0]])))
     exact = 2.0 * sun_shading(mesh, caster, d)
     assert np.abs(through_sh[:, 0] - exact).max() < 0.03 * exact.max()
 
@@ -127,3 +134,14 @@ def test_find_sun_tells_a_coated_surface_from_a_bare_one(scene, coated):
                      sh.fibonacci_sphere(500), coat_ior=1.5)
     assert found.coat_ior == (1.5 if coated else None)
     assert np.degrees(np.arccos(np.clip(found.direction @ to_sun, -1, 1))) < 2.0
+
+
+def test_a_dark_patch_shaped_like_a_sun_is_no_sun(scene):
+    """No sun, but an albedo darker where a sun's column would be bright: a fit would take it
+    for a sun of negative irradiance; such trials cost infinity, so none is kept."""
+    mesh, caster, c_matrix, albedo, sky = scene
+    column = sun_shading(mesh, caster, _unit([0.5, 0.7, 0.3]))
+    radiance = 0.6 * (1 - 0.6 * column / column.max())[:, None] * (c_matrix @ sky)
+    found = find_sun(radiance, c_matrix, mesh.face_adjacency, np.ones(mesh.num_faces, dtype=bool), mesh, caster,
+                     sh.fibonacci_sphere(500), start=_unit([0.5, 0.7, 0.3]))
+    assert not found.cost_ratio <= 0.85            # the default sun_min_gain would not keep it

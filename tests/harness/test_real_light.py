@@ -88,7 +88,8 @@ def test_textured_light_comes_from_edges(tmp_path):
 
 def test_a_sun_is_found_and_drawn_with_its_shadows(tmp_path):
     """The family under Mitsuba's sunsky (diffuse) at tiny size: the default finds the sun
-    near its true direction, and its exact shadows beat the SH light alone (sun_min_gain 1)."""
+    near its true direction, and its exact shadows beat the SH light alone (sun_min_gain 1).
+    The cost ratio measured 0.81 against the default's 0.85 cut."""
     folder = str(tmp_path / "sunsky")
     generate(load_spec(resolve_scene("real-light"), "tiny", {
         "material.model": "diffuse", "illumination.type": "sunsky", "illumination.file": None}), folder)
@@ -96,7 +97,8 @@ def test_a_sun_is_found_and_drawn_with_its_shadows(tmp_path):
     truth = read_ground_truth(folder, ds.data.mesh.num_faces)
     to_sun = np.array(truth.illumination["sunsky"]["to_sun"])
     psnr = {}
-    for gain in (0.1, 1.0):
+    default = EstimatorConfig().sun_min_gain
+    for gain in (default, 1.0):
         est = estimate(ds.data, None, EstimatorConfig(directions=400, sh_order=6, sun_min_gain=gain))
         psnr[gain] = metrics.albedo_psnr(est.diffuse, truth.diffuse, est.observed)
         if gain < 1:
@@ -110,4 +112,4 @@ def test_a_sun_is_found_and_drawn_with_its_shadows(tmp_path):
         else:
             assert est.info["sun"] is None
     # measured: 31.4 dB with the sun (found 1.0 deg off, cost ratio 0.81), 17.1 dB without
-    assert psnr[0.1] > 27.0 and psnr[0.1] > psnr[1.0] + 8.0
+    assert psnr[default] > 27.0 and psnr[default] > psnr[1.0] + 8.0
