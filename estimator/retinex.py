@@ -15,12 +15,14 @@ with l_f the log diffuse radiance of face f and a_r the log albedo of region r. 
 first term is the whole prior for textured objects (no region needed); the second ties
 far-apart faces of one uniform region to one albedo. Gauss-Newton on the IRLS weights of
 the chosen M-estimator (:mod:`estimator.robust`), with steps halved until every shading
-stays positive. Normal equations are accumulated over chunks of rows: memory is linear
-in faces and edges.
+stays positive. The normal equations are formed without the Jacobian: the edges' part is
+g^T L_w g with L_w the weighted graph Laplacian of the face adjacency and g the log
+shading's gradient per face, so time and memory grow with faces x coefficients^2.
 """
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
 
 from . import robust
 from .errors import InputError
@@ -48,7 +50,7 @@ def edge_residuals(radiance: np.ndarray, shading: np.ndarray, edges: np.ndarray,
 def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,
                     labels: np.ndarray | None = None, initial: np.ndarray | None = None,
                     loss: str = "cauchy", ridge: float = 1e-9, iterations: int = 30,
-                    chunk: int = 100_000, indirect: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    indirect: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Light and region albedos that explain the log radiance ratios of neighbouring faces.
 
     Parameters
@@ -62,7 +64,6 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     loss : robust loss of :func:`estimator.robust.irls_weights` ('none' is least squares).
     ridge : weight of the (l (l + 1))^2 penalty on the light's coefficients, per row.
     iterations : Gauss-Newton steps per channel (stops earlier when the step is tiny).
-    chunk : rows per block of the normal equations.
     indirect : (F, 3) shading added to C L (light the object reflects onto itself,
         :mod:`estimator.indirect`); it fixes the light's scale, so the DC is fitted too.
 
@@ -99,13 +100,12 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
         log_radiance = np.log(np.where(usable[:, None], radiance, 1.0))
     for c in range(3):
         light[:, c], albedo[:, c] = _fit_channel(log_radiance[:, c], c_matrix, i, j, member, group, regions,
-                                                 light[:, c], usable, loss, penalty, iterations, chunk,
+                                                 light[:, c], usable, loss, penalty, iterations,
                                                  None if indirect is None else indirect[:, c])
     return light, np.exp(albedo)
 
 
-def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, loss, penalty, iterations, chunk,
-                 extra=None):
+def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, loss, penalty, iterations, extra=None):
     """One channel's Gauss-Newton fit. Unknowns: the light's coefficients from ``first`` on
     (1: the DC is the gauge; 0 with an additive ``extra`` shading, which fixes the scale)
     and the regions' log albedos."""
@@ -122,16 +122,15 @@ def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, los
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
+    incidence = sparse.csr_matrix((np.concatenate([np.ones(len(i)), -np.ones(len(i))]),
+                                   (np.tile(np.arange(len(i)), 2), np.concatenate([i, j]))), shape=(len(i), len(ell)))
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, i, j, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
-        normal, gradient = np.zeros((n, n)), np.zeros(n)
+        normal, gradient = _normal_equations(c_matrix[:, first:] / shade[:, None], incidence, member, group,
+                                             regions, weights, residual)
         normal[:k, :k] += np.diag(penalty)
         gradient[:k] += penalty * light[first:]
-        for rows, jac in _jacobian_blocks(c_matrix[:, first:], shade, i, j, member, group, regions, chunk):
-            wj = jac * weights[rows, None]
-            normal += wj.T @ jac
-            gradient += wj.T @ residual[rows]
         step = -np.linalg.solve(normal + 1e-12 * np.trace(normal) / n * np.eye(n), gradient)
         t = 1.0
         while t > 1e-4:
@@ -158,19 +157,32 @@ def _residuals(ell, log_shade, i, j, member, group, alpha) -> np.ndarray:
     return np.concatenate([edge, region])
 
 
-def _jacobian_blocks(columns, shade, i, j, member, group, regions, chunk):
-    """Yield (row indices, dense Jacobian block) of :func:`_residuals` with respect to the
-    light coefficients whose diffuse rows are ``columns`` (F, k) and the regions' log
-    albedos, ``chunk`` rows at a time."""
-    k = columns.shape[1]
-    for start in range(0, len(i), chunk):
-        a, b = i[start: start + chunk], j[start: start + chunk]
-        jac = np.zeros((len(a), k + regions))
-        jac[:, :k] = -(columns[a] / shade[a, None] - columns[b] / shade[b, None])
-        yield np.arange(start, start + len(a)), jac
-    for start in range(0, len(member), chunk):
-        f, g = member[start: start + chunk], group[start: start + chunk]
-        jac = np.zeros((len(f), k + regions))
-        jac[:, :k] = -columns[f] / shade[f, None]
-        jac[np.arange(len(f)), k + g] = -1.0
-        yield len(i) + np.arange(start, start + len(f)), jac
+def _normal_equations(g, incidence, member, group, regions, weights, residual):
+    """Gauss-Newton normal equations (J^T W J, J^T W r) of :func:`_residuals` with respect to
+    the light coefficients and the regions' log albedos, without forming J.
+
+    ``g`` (F, k) is the log shading's gradient per face (diffuse rows over the shading). An
+    edge's row is -(g_i - g_j) = -(B g)_e with B the (E', F) signed ``incidence`` matrix, so
+    the edges give g^T B^T W B g (a weighted graph Laplacian) and -g^T B^T W r; a region
+    row of face f in group r is [-g_f, -e_r]. Memory and time grow with faces x k^2, not
+    edges x k^2.
+    """
+    k = g.shape[1]
+    ne = incidence.shape[0]
+    w_edge, w_region = weights[:ne], weights[ne:]
+    r_edge, r_region = residual[:ne], residual[ne:]
+    laplacian = incidence.T @ sparse.diags(w_edge) @ incidence
+    normal = np.zeros((k + regions, k + regions))
+    gradient = np.zeros(k + regions)
+    normal[:k, :k] = g.T @ (laplacian @ g)
+    gradient[:k] = -(g.T @ (incidence.T @ (w_edge * r_edge)))
+    if len(member):
+        gm = g[member]
+        normal[:k, :k] += (gm * w_region[:, None]).T @ gm
+        gradient[:k] -= gm.T @ (w_region * r_region)
+        cross = sparse.csr_matrix((w_region, (group, np.arange(len(member)))), shape=(regions, len(member))) @ gm
+        normal[:k, k:] = cross.T
+        normal[k:, :k] = cross
+        normal[k:, k:] = np.diag(np.bincount(group, w_region, minlength=regions))
+        gradient[k:] = -np.bincount(group, w_region * r_region, minlength=regions)
+    return normal, gradient
