@@ -125,7 +125,6 @@ class DefilteredModel(PaperModel):
     uses_exponent = True
 
     def diffuse_matrix(self, mesh, sampling, visibility, faces=None):
-        c = self.config
         return super().diffuse_matrix(mesh, sampling, visibility, faces) * self._gains()[None]
 
     def unknown_from_radiance(self, radiance):

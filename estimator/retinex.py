@@ -37,11 +37,17 @@ def _degrees(m: int) -> np.ndarray:
     return np.concatenate([sh_part, np.zeros(m - len(sh_part))])
 
 
-def edge_residuals(radiance: np.ndarray, shading: np.ndarray, edges: np.ndarray, usable: np.ndarray) -> np.ndarray:
-    """(E', 3) log radiance ratio minus log shading ratio across the edges (E, 2) whose two
-    faces are usable ((F,) bool); radiance and shading (F, 3), positive where usable."""
+def usable_edges(edges: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (E',) i and j of the edges (E, 2) whose two faces are usable ((F,) bool): the
+    edges every fit and cost here runs over."""
     pair = usable[edges[:, 0]] & usable[edges[:, 1]]
-    i, j = edges[pair, 0], edges[pair, 1]
+    return edges[pair, 0], edges[pair, 1]
+
+
+def edge_residuals(radiance: np.ndarray, shading: np.ndarray, edges: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """(E', 3) log radiance ratio minus log shading ratio across the :func:`usable_edges`;
+    radiance and shading (F, 3), positive where usable."""
+    i, j = usable_edges(edges, usable)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.log(radiance[i] / radiance[j]) - np.log(np.maximum(shading[i], 1e-300) / np.maximum(shading[j], 1e-300))
     return ratio
@@ -82,8 +88,7 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     labels = np.full(f, -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
     if labels.shape != (f,):
         raise InputError(f"labels must be (F,) = ({f},), got {labels.shape}")
-    pair = usable[edges[:, 0]] & usable[edges[:, 1]]
-    i, j = edges[pair, 0], edges[pair, 1]
+    i, j = usable_edges(edges, usable)
     member = np.nonzero(usable & (labels >= 0))[0]
     group = labels[member]
     regions = int(labels.max()) + 1 if len(member) else 0
@@ -98,14 +103,18 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     albedo = np.zeros((regions, 3))
     with np.errstate(divide="ignore"):
         log_radiance = np.log(np.where(usable[:, None], radiance, 1.0))
+    # signed (E', F) incidence B: an edge's log ratio is (B x)_e, its Jacobian row -(B g)_e
+    incidence = sparse.csr_matrix((np.concatenate([np.ones(len(i)), -np.ones(len(i))]),
+                                   (np.tile(np.arange(len(i)), 2), np.concatenate([i, j]))), shape=(len(i), f))
     for c in range(3):
-        light[:, c], albedo[:, c] = _fit_channel(log_radiance[:, c], c_matrix, i, j, member, group, regions,
+        light[:, c], albedo[:, c] = _fit_channel(log_radiance[:, c], c_matrix, incidence, member, group, regions,
                                                  light[:, c], usable, loss, penalty, iterations,
                                                  None if indirect is None else indirect[:, c])
     return light, np.exp(albedo)
 
 
-def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, loss, penalty, iterations, extra=None):
+def _fit_channel(ell, c_matrix, incidence, member, group, regions, light, usable, loss, penalty, iterations,
+                 extra=None):
     """One channel's Gauss-Newton fit. Unknowns: the light's coefficients from ``first`` on
     (1: the DC is the gauge; 0 with an additive ``extra`` shading, which fixes the scale)
     and the regions' log albedos."""
@@ -122,10 +131,8 @@ def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, los
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
-    incidence = sparse.csr_matrix((np.concatenate([np.ones(len(i)), -np.ones(len(i))]),
-                                   (np.tile(np.arange(len(i)), 2), np.concatenate([i, j]))), shape=(len(i), len(ell)))
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
-        residual = _residuals(ell, log_shade, i, j, member, group, alpha)
+        residual = _residuals(ell, log_shade, incidence, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
         normal, gradient = _normal_equations(c_matrix[:, first:] / shade[:, None], incidence, member, group,
                                              regions, weights, residual)
@@ -150,9 +157,9 @@ def _fit_channel(ell, c_matrix, i, j, member, group, regions, light, usable, los
     return light, alpha
 
 
-def _residuals(ell, log_shade, i, j, member, group, alpha) -> np.ndarray:
-    """(E' + R',) edge residuals then region residuals."""
-    edge = (ell[i] - ell[j]) - (log_shade[i] - log_shade[j])
+def _residuals(ell, log_shade, incidence, member, group, alpha) -> np.ndarray:
+    """(E' + R',) edge residuals (log radiance ratio minus log shading ratio) then region residuals."""
+    edge = incidence @ (ell - log_shade)
     region = ell[member] - log_shade[member] - alpha[group] if len(member) else np.zeros(0)
     return np.concatenate([edge, region])
 
