@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import albedo_prior, coat, indirect, pose, retinex, robust, sh, sun, trust
+from . import albedo_prior, coat, indirect, pose, reflected_light, retinex, robust, sh, sun, trust
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
@@ -554,9 +554,11 @@ class RetinexSegmented(Method):
             raise InputError("retinex-segmented estimates the diffuse albedo from shading; for specular-only "
                              "data (components='specular') use bilinear-per-face")
         t = time.perf_counter()
+        self._reflected = None   # the coat's reflected light, fitted on first need from these observations
+        self._original_obs = prep.obs
         est = self._fit(prep)
         weight = np.zeros(3)
-        if c.coat_correction:
+        if c.coat_correction and est.info["light_from"] != "reflection":   # that light models the coat already
             obs = prep.obs
             rows = coat.coat_rows(prep.data.mesh.face_normals[obs.face], obs.view_dir,
                                   est.light, c.coat_order, c.coat_ior)
@@ -604,6 +606,7 @@ class RetinexSegmented(Method):
         labels, _ = segment(np.where(lit[:, None], albedo, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
         share = float(np.mean(labels[lit] >= 0))
         regions = int(labels.max()) + 1
+        light_from = "edges and regions" if regions and share >= c.retinex_min_uniform_share else "edges"
         if regions and share >= c.retinex_min_uniform_share:
             labels = np.where(lit, labels, -1)
             for _ in range(2):  # the regions' fit; then faces near a region in albedo join it, and again
@@ -616,6 +619,13 @@ class RetinexSegmented(Method):
             albedo[tied] = region_albedo[labels[tied]]
         else:
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
+            if columns.shape[1] == prep.c_matrix.shape[1] and c.reflected_light and not c.interreflection:
+                r = self._reflection(prep)
+                if r.determined and np.all(r.explained >= c.reflected_min_explained):
+                    light, columns, reflected_sun = self._reflected_light(prep, radiance, edges, usable, fit)
+                    found = reflected_sun or found
+                    albedo, lit = self._divide(columns, radiance, light, usable, extra)
+                    light_from = "reflection"
         m = prep.c_matrix.shape[1]
         sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
                                                 "evaluations": found.evaluations, "used": columns.shape[1] > m,
@@ -641,7 +651,8 @@ class RetinexSegmented(Method):
         per_group = 2 if c.components == "both" else 1
         info = {"clusters": int(len(np.unique(group[observed]))), "uniform_regions": regions,
                 "uniform_share": share, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
-                "sun": sun_info,
+                "sun": sun_info, "light_from": light_from,
+                "reflection_explained": None if self._reflected is None else self._reflected.explained.tolist(),
                 "degrees_of_freedom": {"observations": int(3 * len(obs.face)),
                                        "unknowns": int(3 * (per_group * (regions + (~(labels >= 0) & observed).sum())
                                                             + light.shape[0] - 1))}}
@@ -649,6 +660,47 @@ class RetinexSegmented(Method):
         return Estimate(np.where(zero, 0.0, albedo), np.where(zero, 0.0, specular),
                         self.model.pseudo_from_light(light), labels_out, observed, self.name, c, info,
                         light if self.model.light == "radiance" else None)
+
+    def _reflection(self, prep) -> reflected_light.ReflectedLight:
+        """The light the coat reflects, fitted once per solve on the observations before any
+        coat correction."""
+        if self._reflected is None:
+            obs = self._original_obs
+            self._reflected = reflected_light.fit_reflected_light(
+                obs.face, obs.rgb, obs.view_dir, prep.data.mesh.face_normals, prep.sampling, prep.visibility,
+                self.config.coat_ior, loss=self.loss)
+        return self._reflected
+
+    def _reflected_light(self, prep, radiance, edges, usable, fit):
+        """The texture's light from the coat's reflection (:mod:`estimator.reflected_light`):
+        the reflected map's sky (its brightest compact source cut out) as the SH light, and
+        that source as a sun with exact shadows, its irradiance relative to the sky fitted
+        to the albedo edges per channel (one unknown each). The sun is kept when it lowers
+        the edge fit's robust cost by ``sun_min_gain`` and is positive in every channel.
+
+        Returns the light (M', 3) (unit sky DC, the sun's irradiance last when kept), the
+        shading columns (F, M') and the sun (or None)."""
+        c = self.config
+        sky_map, direction = self._reflected.sky_and_sun()
+        sky = self.model.unknown_from_radiance(sh.project_latlong(c.sh_order, sky_map))
+        sky = sky / sky[0]
+        sun_column = sun.sun_shading(prep.data.mesh, prep.caster, direction, c.coat_ior)
+        sky_shading = prep.c_matrix @ sky                                   # (F, 3)
+        with_sun = np.zeros(3)
+        for k in range(3):   # one unknown per channel: the sun's irradiance over the sky's
+            pair = np.stack([sky_shading[:, k], sun_column], axis=1)
+            with_sun[k] = retinex.log_shading_fit(radiance[:, [k, k, k]], pair, edges, usable, **fit)[0][1, 0]
+        both = sky_shading + with_sun * sun_column[:, None]
+        base = retinex.edge_residuals(radiance, sky_shading, edges, usable)
+        scale = np.array([robust.robust_scale(np.abs(base[:, k])) for k in range(3)])
+        trial = retinex.edge_residuals(radiance, np.maximum(both, 1e-300), edges, usable)
+        finite = np.all(np.isfinite(base), axis=1) & np.all(np.isfinite(trial), axis=1)
+        ratio = float(np.sum(np.log1p((trial[finite] / scale) ** 2)) / max(np.sum(np.log1p((base[finite] / scale) ** 2)), 1e-300))
+        if np.all(with_sun > 0) and ratio <= c.reflected_sun_max_ratio:
+            found = sun.Sun(direction, ratio, 3, c.coat_ior)
+            return (np.vstack([sky, with_sun[None]]), np.hstack([prep.c_matrix, sun_column[:, None]]), found)
+        whole = self.model.unknown_from_radiance(self._reflected.sh(c.sh_order))
+        return whole / whole[0], prep.c_matrix, None
 
     @staticmethod
     def _divide(columns, radiance, light, usable, extra=0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,141 @@
+"""The light a dielectric coat reflects, fitted with every face's diffuse free: round trip
+on synthetic rows, robustness to glints, no light where nothing changes with the view,
+the sun cut out of the map, and bad inputs."""
+import numpy as np
+import pytest
+
+from estimator import latlong, sh
+from estimator.coat import fresnel_dielectric
+from estimator.errors import InputError
+from estimator.reflected_light import bilinear_rows, fit_reflected_light, map_differences
+from estimator.reflection import mirror_directions
+from estimator.visibility import Visibility, sphere_sampling
+
+
+def _rows(true_map, faces=1500, views=24, ior=1.5, seed=0):
+    """Synthetic coated observations of a convex object: face normals spread on the sphere,
+    cameras all around, rgb = D (1 - F) + F L(r) with L sampled bilinearly from ``true_map``."""
+    rng = np.random.default_rng(seed)
+    normals = sh.fibonacci_sphere(faces)
+    cameras = sh.fibonacci_sphere(views)
+    cos = normals @ cameras.T
+    face, view = np.nonzero(cos > 0.5)
+    view_dir = cameras[view]
+    diffuse = rng.uniform(0.03, 0.8, size=(faces, 3))          # a texture: any level per face
+    mirror = mirror_directions(normals[face], view_dir)
+    f = fresnel_dielectric(np.sum(normals[face] * view_dir, axis=1), ior)[:, None]
+    rgb = diffuse[face] * (1 - f) + f * latlong.sample_bilinear(true_map, mirror)
+    sampling = sphere_sampling(64)
+    everywhere = Visibility(np.full((faces, 8), 255, dtype=np.uint8), 64)   # nothing blocks a mirror ray
+    return face, rgb, view_dir, normals, sampling, everywhere, diffuse
+
+
+def _smooth_map(height=16, width=32):
+    coeffs = np.zeros((sh.num_coeffs(2), 3))
+    coeffs[0] = [2.0, 1.8, 1.5]
+    coeffs[2] = [0.8, 0.7, 0.4]       # brighter above
+    coeffs[3] = [0.3, -0.2, 0.1]
+    coeffs[5] = [0.2, 0.1, -0.1]
+    return sh.to_latlong(coeffs, height, width)
+
+
+def test_bilinear_rows_sample_like_the_envmap_lookup():
+    rng = np.random.default_rng(3)
+    image = rng.uniform(size=(9, 16, 3))
+    dirs = rng.normal(size=(200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    np.testing.assert_allclose(bilinear_rows(dirs, 9, 16) @ image.reshape(-1, 3),
+                               latlong.sample_bilinear(image, dirs), atol=1e-12)
+
+
+def test_map_differences_vanish_on_a_constant_map():
+    d = map_differences(5, 8)
+    assert d.shape == (5 * 8 + 4 * 8, 40)
+    np.testing.assert_allclose(d @ np.ones(40), 0.0, atol=1e-12)
+
+
+def test_round_trip_recovers_the_light_and_the_texture():
+    """Rows made by the model itself: the map's low orders come back within 2 % (the DC
+    too: F's change with the view fixes it against the diffuse), the per-face diffuse within
+    1 %, and the model explains the view changes."""
+    true_map = _smooth_map()
+    face, rgb, view_dir, normals, sampling, vis, diffuse = _rows(true_map)
+    fit = fit_reflected_light(face, rgb, view_dir, normals, sampling, vis, height=16, width=32, smoothness=1e-6)
+    assert fit.radiance.shape == (16, 32, 3) and fit.diffuse.shape == (len(normals), 3)
+    low_true, low_fit = sh.project_latlong(2, true_map), fit.sh(2)
+    np.testing.assert_allclose(low_fit, low_true, atol=0.02 * np.abs(low_true[0]).max())
+    seen = np.all(np.isfinite(fit.diffuse), axis=1)
+    assert seen.mean() > 0.99
+    np.testing.assert_allclose(fit.diffuse[seen], diffuse[seen], rtol=0.01, atol=1e-3)
+    assert np.all(fit.explained > 0.99)
+
+
+def test_glints_are_downweighted():
+    """1 % of the rows carry a glint 20 x the light (a sun narrower than a cell): the low
+    orders still come back within 3 %."""
+    true_map = _smooth_map()
+    face, rgb, view_dir, normals, sampling, vis, _ = _rows(true_map, seed=1)
+    rgb = rgb.copy()
+    rgb[::100] += 40.0
+    fit = fit_reflected_light(face, rgb, view_dir, normals, sampling, vis, height=16, width=32, smoothness=1e-6)
+    low_true = sh.project_latlong(2, true_map)
+    np.testing.assert_allclose(fit.sh(2), low_true, atol=0.03 * np.abs(low_true[0]).max())
+
+
+def test_view_independent_colours_are_not_explained_by_a_reflection():
+    """A bare diffuse texture with 1 % noise: nothing changes with the view but the noise.
+    A uniform reflected light L = D would explain a uniform diffuse exactly (D = D (1 - F) +
+    F D), so part of each face's level is explained (measured 0.62 here), but not enough to
+    pass the method's gate, reflected_min_explained 0.9 (measured 0.51-0.77 on the Phong
+    textured scenes, 0.97-1.0 on the coated ones)."""
+    face, _, view_dir, normals, sampling, vis, diffuse = _rows(_smooth_map(), seed=2)
+    rng = np.random.default_rng(5)
+    rgb = diffuse[face] * (1 + 0.01 * rng.normal(size=(len(face), 3)))
+    fit = fit_reflected_light(face, rgb, view_dir, normals, sampling, vis, height=16, width=32)
+    assert np.all(fit.explained < 0.8)
+
+
+def test_blocked_mirror_directions_are_left_out():
+    true_map = _smooth_map()
+    face, rgb, view_dir, normals, sampling, vis, _ = _rows(true_map)
+    blocked = Visibility(np.zeros_like(vis.bits), vis.num_directions)
+    with pytest.raises(InputError, match="blocked"):
+        fit_reflected_light(face, rgb, view_dir, normals, sampling, blocked)
+
+
+def test_the_determined_flag_needs_rows_per_vertex():
+    face, rgb, view_dir, normals, sampling, vis, _ = _rows(_smooth_map(), faces=300, views=12)
+    assert not fit_reflected_light(face, rgb, view_dir, normals, sampling, vis).determined      # 32 x 64: too few
+    assert fit_reflected_light(face, rgb, view_dir, normals, sampling, vis, height=4, width=8).determined
+
+
+def test_sky_and_sun_cuts_the_brightest_compact_source():
+    height, width = 32, 64
+    sun_dir = np.array([0.5, 0.6, -0.62])
+    sun_dir /= np.linalg.norm(sun_dir)
+    dirs = latlong.directions(height, width)
+    sky = _smooth_map(height, width)
+    spot = np.exp(-(np.degrees(np.arccos(np.clip(dirs @ sun_dir, -1, 1))) / 4.0) ** 2)[..., None] * 200.0
+    from estimator.reflected_light import ReflectedLight
+    light = ReflectedLight(sky + spot, np.zeros((1, 3)), np.ones(3), 1, True)
+    cut, direction = light.sky_and_sun()
+    assert np.degrees(np.arccos(np.clip(direction @ sun_dir, -1, 1))) < 3.0
+    assert cut.max() < 1.5 * sky.max()
+    far = np.degrees(np.arccos(np.clip(dirs @ sun_dir, -1, 1))) > 20
+    np.testing.assert_array_equal(cut[far], (sky + spot)[far])
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(rgb=np.zeros((3, 3))), "rgb and view_dir"),
+    (dict(ior=1.0), "ior"),
+    (dict(height=2), "3 x 2"),
+    (dict(face=np.array([0, 1, 99999])), "faces must lie"),
+])
+def test_bad_inputs_name_the_problem(change, message):
+    face, rgb, view_dir, normals, sampling, vis, _ = _rows(_smooth_map(), faces=50, views=6)
+    args = dict(face=face, rgb=rgb, view_dir=view_dir, normals=normals, sampling=sampling, visibility=vis)
+    if "face" in change:
+        args["face"] = np.resize(change.pop("face"), len(face))
+    args.update(change)
+    with pytest.raises(InputError, match=message):
+        fit_reflected_light(**args)
