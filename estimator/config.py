@@ -115,7 +115,7 @@ class EstimatorConfig:
         (:mod:`estimator.reflected_light`: a 32 x 64 lat-long map fitted to the colours'
         changes across views, every face's diffuse free, so the texture cannot bias it)
         instead of the albedo edges, when no sun was kept by the edge search, the map is
-        determined (16 rows per vertex beyond the faces' own unknowns) and it explains at
+        determined (4 rows per vertex beyond the faces' own unknowns; about 10 at full size) and it explains at
         least ``reflected_min_explained`` of the view changes in every channel (0.97-1.0 on
         the coated textured scenes, 0.51-0.77 on the Phong ones). The map's brightest
         compact source then becomes a sun with exact shadows, its irradiance fitted to the
