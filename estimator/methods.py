@@ -543,6 +543,11 @@ class RetinexSegmented(Method):
        light's low orders (``coat_order``) is fitted to the colours' changes across views
        (:mod:`estimator.coat`), scaled down until at most ``coat_max_negative`` more of the
        observations would turn non-positive, subtracted, and steps 1-5 run again.
+
+    On a coated texture (step 4 finds no uniform regions, the edge search kept no sun) the
+    light comes instead from the coat's reflection (:mod:`estimator.reflected_light`), which
+    the texture cannot bias, when that map is determined and explains at least
+    ``reflected_min_explained`` of the view changes; step 6 is then skipped.
     """
 
     name = "retinex-segmented"
@@ -606,8 +611,9 @@ class RetinexSegmented(Method):
         labels, _ = segment(np.where(lit[:, None], albedo, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
         share = float(np.mean(labels[lit] >= 0))
         regions = int(labels.max()) + 1
-        light_from = "edges and regions" if regions and share >= c.retinex_min_uniform_share else "edges"
+        light_from = "edges"
         if regions and share >= c.retinex_min_uniform_share:
+            light_from = "edges and regions"
             labels = np.where(lit, labels, -1)
             for _ in range(2):  # the regions' fit; then faces near a region in albedo join it, and again
                 light, region_albedo = retinex.log_shading_fit(radiance, columns, edges, usable, labels,
@@ -672,11 +678,12 @@ class RetinexSegmented(Method):
         return self._reflected
 
     def _reflected_light(self, prep, radiance, edges, usable, fit):
-        """The texture's light from the coat's reflection (:mod:`estimator.reflected_light`):
-        the reflected map's sky (its brightest compact source cut out) as the SH light, and
-        that source as a sun with exact shadows, its irradiance relative to the sky fitted
-        to the albedo edges per channel (one unknown each). The sun is kept when it lowers
-        the edge fit's robust cost by ``sun_min_gain`` and is positive in every channel.
+        """The texture's light from the coat's reflection (:mod:`estimator.reflected_light`).
+        The map's brightest compact source is tried as a sun with exact shadows beside the
+        map's sky (that source cut out), its irradiance over the sky's fitted to the albedo
+        edges per channel (one unknown each); it is kept when positive in every channel and
+        the edge cost ratio is at most ``reflected_sun_max_ratio``. Otherwise the whole map
+        is the light (cutting its peak out without a sun cost plastic/lab 8.7 dB).
 
         Returns the light (M', 3) (unit sky DC, the sun's irradiance last when kept), the
         shading columns (F, M') and the sun (or None)."""
@@ -692,12 +699,12 @@ class RetinexSegmented(Method):
             with_sun[k] = retinex.log_shading_fit(radiance[:, [k, k, k]], pair, edges, usable, **fit)[0][1, 0]
         both = sky_shading + with_sun * sun_column[:, None]
         base = retinex.edge_residuals(radiance, sky_shading, edges, usable)
-        scale = np.array([robust.robust_scale(np.abs(base[:, k])) for k in range(3)])
         trial = retinex.edge_residuals(radiance, np.maximum(both, 1e-300), edges, usable)
-        finite = np.all(np.isfinite(base), axis=1) & np.all(np.isfinite(trial), axis=1)
-        ratio = float(np.sum(np.log1p((trial[finite] / scale) ** 2)) / max(np.sum(np.log1p((base[finite] / scale) ** 2)), 1e-300))
+        finite = np.all(np.isfinite(base), axis=1) & np.all(np.isfinite(trial), axis=1)   # unlit faces
+        scale = sun.edge_scale(base[finite])
+        ratio = sun.edge_cost(trial[finite], scale) / max(sun.edge_cost(base[finite], scale), 1e-300)
         if np.all(with_sun > 0) and ratio <= c.reflected_sun_max_ratio:
-            found = sun.Sun(direction, ratio, 3, c.coat_ior)
+            found = sun.Sun(direction, ratio, 3, c.coat_ior)   # 3 evaluations: one fit per channel
             return (np.vstack([sky, with_sun[None]]), np.hstack([prep.c_matrix, sun_column[:, None]]), found)
         whole = self.model.unknown_from_radiance(self._reflected.sh(c.sh_order))
         return whole / whole[0], prep.c_matrix, None

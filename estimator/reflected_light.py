@@ -18,8 +18,10 @@ light, and are left out.
 
 The diffuse albedo does not enter: a texture, however its colours vary, cannot bias this
 light, which is where the albedo-edge fit (:mod:`estimator.retinex`) is weakest. The
-light's scale relative to D_f is fixed by F's change with the view angle, so it is weak at
-near-normal views; callers use its low orders as a prior beside the edges, not alone.
+light's DC relative to D_f is fixed only by F's change with the view angle (0.04-0.09 over
+the views within 60 degrees of the normal), and a sun narrower than a cell reaches the map
+blurred: ``retinex-segmented`` uses the whole map as a texture's light, or its sky beside a
+sun with exact shadows (:meth:`ReflectedLight.sky_and_sun`).
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ from .visibility import SphereSampling, Visibility
 
 
 ROWS_PER_VERTEX = 4  # rows beyond the per-face unknowns per map vertex for a determined map
+
 
 @dataclass(frozen=True)
 class ReflectedLight:

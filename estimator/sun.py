@@ -80,6 +80,17 @@ def brightest_direction(light: np.ndarray, directions: np.ndarray) -> np.ndarray
     return directions[int(np.argmax((sh.basis(order, directions) @ light).mean(axis=1)))]
 
 
+def edge_scale(residuals: np.ndarray) -> np.ndarray:
+    """(3,) robust scale per channel of edge residuals (E, 3) (:func:`estimator.retinex.edge_residuals`)."""
+    return np.array([robust.robust_scale(np.abs(residuals[:, c])) for c in range(residuals.shape[1])])
+
+
+def edge_cost(residuals: np.ndarray, scale: np.ndarray) -> float:
+    """Cauchy-shaped cost sum log(1 + (r / s)^2) of edge residuals (E, 3) at fixed per-channel
+    scales (3,): the sun's cost, with the scales of the sunless fit, so two lights compare."""
+    return float(np.sum(np.log1p((residuals / scale) ** 2)))
+
+
 def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,
              mesh: TriangleMesh, caster: RayCaster, directions: np.ndarray, start: np.ndarray | None = None,
              order: int = 2, start_order: int = 4, steps_deg: tuple[float, ...] = SEARCH_STEPS_DEG,
@@ -115,17 +126,16 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
         start = brightest_direction(retinex.log_shading_fit(radiance, coarse, edges, usable, loss=loss)[0], directions)
     base_light, _ = retinex.log_shading_fit(radiance, low, edges, usable, **fit)
     base = retinex.edge_residuals(radiance, low @ base_light, edges, usable)
-    scale = np.array([robust.robust_scale(np.abs(base[:, c])) for c in range(3)])
+    scale = edge_scale(base)
 
     def cost(d, ior):
         columns = np.hstack([low, sun_shading(mesh, caster, d, ior)[:, None]])
         light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
         if np.any(light[-1] <= 0):      # a sun takes light away nowhere: a dark albedo patch is no sun
             return np.inf
-        r = retinex.edge_residuals(radiance, columns @ light, edges, usable)
-        return float(np.sum(np.log1p((r / scale) ** 2)))
+        return edge_cost(retinex.edge_residuals(radiance, columns @ light, edges, usable), scale)
 
-    base_cost = float(np.sum(np.log1p((base / scale) ** 2)))
+    base_cost = edge_cost(base, scale)
 
     def descend(d, best, ior, steps):
         """Pattern search from ``d``: move to the best of six neighbours on a ring while it
