@@ -18,17 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import robust, sh
-from .reflection import mirror_directions
-
-
-def fresnel_dielectric(cos_theta: np.ndarray, ior: float) -> np.ndarray:
-    """(N,) unpolarised Fresnel reflectance of a dielectric of index ``ior`` (from air) at
-    incidence cosines (N,) (clamped to (0, 1])."""
-    c = np.clip(cos_theta, 1e-6, 1.0)
-    t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / ior ** 2, 0.0))
-    rs = (c - ior * t) / (c + ior * t)
-    rp = (ior * c - t) / (ior * c + t)
-    return 0.5 * (rs * rs + rp * rp)
+from .reflection import fresnel_dielectric, mirror_directions
 
 
 def coat_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, order: int, ior: float) -> np.ndarray:

@@ -547,7 +547,10 @@ class RetinexSegmented(Method):
     On a coated texture (step 4 finds no uniform regions, the edge search kept no sun) the
     light comes instead from the coat's reflection (:mod:`estimator.reflected_light`), which
     the texture cannot bias, when that map is determined and explains at least
-    ``reflected_min_explained`` of the view changes; step 6 is then skipped.
+    ``reflected_min_explained`` of the view changes; step 6 is then skipped. The albedo is
+    then that fit's diffuse radiance (the coat's reflection removed, its exit transmission
+    1 - F(n . v) divided out) over the light's shading through the coat (the cosine weighted
+    by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``).
     """
 
     name = "retinex-segmented"
@@ -628,6 +631,7 @@ class RetinexSegmented(Method):
             if columns.shape[1] == prep.c_matrix.shape[1] and c.reflected_light and not c.interreflection:
                 r = self._reflection(prep)
                 if r.determined and np.all(r.explained >= c.reflected_min_explained):
+                    radiance = np.where(np.isfinite(r.diffuse) & (r.diffuse > 0), r.diffuse, radiance)
                     light, columns, reflected_sun = self._reflected_light(prep, radiance, edges, usable, fit)
                     found = reflected_sun or found
                     albedo, lit = self._divide(columns, radiance, light, usable, extra)
@@ -686,13 +690,14 @@ class RetinexSegmented(Method):
         is the light (cutting its peak out without a sun cost plastic/lab 8.7 dB).
 
         Returns the light (M', 3) (unit sky DC, the sun's irradiance last when kept), the
-        shading columns (F, M') and the sun (or None)."""
+        shading columns (F, M') through the coat and the sun (or None)."""
         c = self.config
+        through_coat = self.model.diffuse_matrix(prep.data.mesh, prep.sampling, prep.visibility, coat_ior=c.coat_ior)
         sky_map, direction = self._reflected.sky_and_sun()
         sky = self.model.unknown_from_radiance(sh.project_latlong(c.sh_order, sky_map))
         sky = sky / sky[0]
         sun_column = sun.sun_shading(prep.data.mesh, prep.caster, direction, c.coat_ior)
-        sky_shading = prep.c_matrix @ sky                                   # (F, 3)
+        sky_shading = through_coat @ sky                                    # (F, 3)
         with_sun = np.zeros(3)
         for k in range(3):   # one unknown per channel: the sun's irradiance over the sky's
             pair = np.stack([sky_shading[:, k], sun_column], axis=1)
@@ -705,9 +710,9 @@ class RetinexSegmented(Method):
         ratio = sun.edge_cost(trial[finite], scale) / max(sun.edge_cost(base[finite], scale), 1e-300)
         if np.all(with_sun > 0) and ratio <= c.reflected_sun_max_ratio:
             found = sun.Sun(direction, ratio, 3, c.coat_ior)   # 3 evaluations: one fit per channel
-            return (np.vstack([sky, with_sun[None]]), np.hstack([prep.c_matrix, sun_column[:, None]]), found)
+            return (np.vstack([sky, with_sun[None]]), np.hstack([through_coat, sun_column[:, None]]), found)
         whole = self.model.unknown_from_radiance(self._reflected.sh(c.sh_order))
-        return whole / whole[0], prep.c_matrix, None
+        return whole / whole[0], through_coat, None
 
     @staticmethod
     def _divide(columns, radiance, light, usable, extra=0.0) -> tuple[np.ndarray, np.ndarray]:

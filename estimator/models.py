@@ -65,10 +65,11 @@ class ReflectionModel(ABC):
         self.order = config.sh_order
 
     def diffuse_matrix(self, mesh: TriangleMesh, sampling: SphereSampling, visibility: Visibility,
-                       faces: np.ndarray | None = None) -> np.ndarray:
+                       faces: np.ndarray | None = None, coat_ior: float | None = None) -> np.ndarray:
         """(F, M) diffuse rows C_i multiplying the light unknown (the paper's Eq. 13); (n, M)
-        for the faces (n,) only, when given."""
-        return diffuse_matrix(mesh, sampling, visibility, self.order, faces)
+        for the faces (n,) only, when given; the light passing a smooth coat of index
+        ``coat_ior`` on its way in, when given (:func:`estimator.reflection.diffuse_matrix`)."""
+        return diffuse_matrix(mesh, sampling, visibility, self.order, faces, coat_ior)
 
     @abstractmethod
     def specular_rows(self, faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
@@ -124,8 +125,8 @@ class DefilteredModel(PaperModel):
     name = "defiltered"
     uses_exponent = True
 
-    def diffuse_matrix(self, mesh, sampling, visibility, faces=None):
-        return super().diffuse_matrix(mesh, sampling, visibility, faces) * self._gains()[None]
+    def diffuse_matrix(self, mesh, sampling, visibility, faces=None, coat_ior=None):
+        return super().diffuse_matrix(mesh, sampling, visibility, faces, coat_ior) * self._gains()[None]
 
     def unknown_from_radiance(self, radiance):
         return radiance / self._gains()[: len(radiance), None]

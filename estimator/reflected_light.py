@@ -33,7 +33,7 @@ from scipy import sparse
 from . import latlong, robust, sh
 from .coat import fresnel_dielectric
 from .errors import InputError
-from .reflection import mirror_directions
+from .reflection import fresnel_dielectric, mirror_directions
 from .visibility import SphereSampling, Visibility
 
 

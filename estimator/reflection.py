@@ -9,12 +9,15 @@ from .visibility import SphereSampling, Visibility
 
 
 def diffuse_matrix(mesh: TriangleMesh, sampling: SphereSampling, visibility: Visibility, order: int,
-                   faces: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
+                   faces: np.ndarray | None = None, coat_ior: float | None = None, chunk: int = 4096) -> np.ndarray:
     """C_lm^(i) = (1/pi) int s_i(w) Y_lm(w) max(0, w . n_i) dw, by the sphere-mesh quadrature.
 
     Parameters
     ----------
     faces : (n,) the faces whose rows are wanted; None: every face.
+    coat_ior : the light reaches the diffuse layer through a smooth dielectric coat of this
+        index: the cosine is weighted by the coat's transmission 1 - F(w . n_i) (Mitsuba's
+        ``plastic``; grazing light is mostly reflected). None: a bare diffuse surface.
 
     Returns
     -------
@@ -28,8 +31,20 @@ def diffuse_matrix(mesh: TriangleMesh, sampling: SphereSampling, visibility: Vis
     for start in range(0, len(faces), chunk):
         part = faces[start:start + chunk]
         cos = np.maximum(normals[part] @ sampling.directions.T, 0.0)
+        if coat_ior is not None:
+            cos = cos * (1.0 - fresnel_dielectric(cos, coat_ior))
         out[start:start + len(part)] = (cos * visibility.unpack(part)) @ y_weighted
     return out
+
+
+def fresnel_dielectric(cos_theta: np.ndarray, ior: float) -> np.ndarray:
+    """(N,) unpolarised Fresnel reflectance of a dielectric of index ``ior`` (from air) at
+    incidence cosines (N,) (clamped to (0, 1])."""
+    c = np.clip(cos_theta, 1e-6, 1.0)
+    t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / ior ** 2, 0.0))
+    rs = (c - ior * t) / (c + ior * t)
+    rp = (ior * c - t) / (ior * c + t)
+    return 0.5 * (rs * rs + rp * rp)
 
 
 def mirror_directions(normals: np.ndarray, view_dir: np.ndarray) -> np.ndarray:

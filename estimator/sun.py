@@ -25,9 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import retinex, robust, sh
-from .coat import fresnel_dielectric
 from .data import TriangleMesh
 from .raycast import RayCaster
+from .reflection import fresnel_dielectric
 
 SAMPLE_POINTS = 6       # shadow rays per face for its lit share
 SEARCH_STEPS_DEG = (6.0, 3.0, 1.5)

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from estimator import sh
-from estimator.coat import admissible_scale, coat_rows, fit_coat, fresnel_dielectric
+from estimator.coat import admissible_scale, coat_rows, fit_coat
+from estimator.reflection import fresnel_dielectric
 
 
 def test_fresnel_limits():

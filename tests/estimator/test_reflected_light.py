@@ -5,10 +5,9 @@ import numpy as np
 import pytest
 
 from estimator import latlong, sh
-from estimator.coat import fresnel_dielectric
 from estimator.errors import InputError
 from estimator.reflected_light import bilinear_rows, fit_reflected_light, map_differences
-from estimator.reflection import mirror_directions
+from estimator.reflection import fresnel_dielectric, mirror_directions
 from estimator.visibility import Visibility, sphere_sampling
 
 
