@@ -535,8 +535,10 @@ class RetinexSegmented(Method):
     4. When at least ``retinex_min_uniform_share`` of the lit faces lie in uniform
        regions, the light is fitted again with each region's faces tied to one albedo
        (far-apart faces of a region constrain the light as the edges cannot), and each
-       region takes that albedo. Otherwise the edges alone set the light and every face
-       keeps its own albedo (a texture).
+       region takes that albedo, unless the faces drift from their region's albedo beyond
+       ``region_max_deviation`` and ``region_max_drift`` times the noise between neighbours
+       (a texture chained into regions). Otherwise the edges alone set the light and every
+       face keeps its own albedo (a texture).
     5. The specular albedo is solved with that light fixed (per region; faces outside
        every region share the regions' median, or one fit over all faces without regions).
     6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
@@ -615,18 +617,15 @@ class RetinexSegmented(Method):
         share = float(np.mean(labels[lit] >= 0))
         regions = int(labels.max()) + 1
         light_from = "edges"
+        deviation = drift = None
         if regions and share >= c.retinex_min_uniform_share:
-            light_from = "edges and regions"
-            labels = np.where(lit, labels, -1)
-            for _ in range(2):  # the regions' fit; then faces near a region in albedo join it, and again
-                light, region_albedo = retinex.log_shading_fit(radiance, columns, edges, usable, labels,
-                                                               initial=light, **fit)
-                albedo, lit = self._divide(columns, radiance, light, usable, extra)
-                joined = BilinearSegmented._assign(labels, albedo, lit, edges, 2.5 * c.segment_threshold)
-                labels = np.where(lit & (joined < regions), joined, -1)
-            tied = lit & (labels >= 0)
-            albedo[tied] = region_albedo[labels[tied]]
-        else:
+            tied_fit = self._tie_regions(radiance, columns, edges, usable, np.where(lit, labels, -1), regions,
+                                         light, fit, extra)
+            deviation, drift = tied_fit[-2:]
+            if deviation <= c.region_max_deviation or drift <= c.region_max_drift:
+                light_from = "edges and regions"
+                light, albedo, lit, labels = tied_fit[:4]
+        if light_from == "edges":
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
             if columns.shape[1] == prep.c_matrix.shape[1] and c.reflected_light and not c.interreflection:
                 r = self._reflection(prep)
@@ -661,7 +660,7 @@ class RetinexSegmented(Method):
         per_group = 2 if c.components == "both" else 1
         info = {"clusters": int(len(np.unique(group[observed]))), "uniform_regions": regions,
                 "uniform_share": share, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
-                "sun": sun_info, "light_from": light_from,
+                "sun": sun_info, "light_from": light_from, "region_deviation": deviation, "region_drift": drift,
                 "reflection_explained": None if self._reflected is None else self._reflected.explained.tolist(),
                 "degrees_of_freedom": {"observations": int(3 * len(obs.face)),
                                        "unknowns": int(3 * (per_group * (regions + (~(labels >= 0) & observed).sum())
@@ -670,6 +669,34 @@ class RetinexSegmented(Method):
         return Estimate(np.where(zero, 0.0, albedo), np.where(zero, 0.0, specular),
                         self.model.pseudo_from_light(light), labels_out, observed, self.name, c, info,
                         light if self.model.light == "radiance" else None)
+
+    def _tie_regions(self, radiance, columns, edges, usable, labels, regions, light, fit, extra):
+        """The light refitted with each uniform region's faces tied to one albedo (twice; faces
+        near a region in albedo join it after the first fit), and each region's faces given
+        that albedo.
+
+        Returns the light (M', 3), albedo (F, 3), lit (F,), labels (F,) (-1: no region), the
+        regions' deviation: the median over their faces of the mean over channels of
+        |log(face albedo / region albedo)|, each face's own albedo under the tied fit's light,
+        and its drift: that deviation over the same median between neighbouring faces of a
+        region (noise alone gives about 0.7; a texture chained into one region by small steps
+        drifts further from its region's albedo than neighbours differ)."""
+        c = self.config
+        for _ in range(2):
+            light, region_albedo = retinex.log_shading_fit(radiance, columns, edges, usable, labels,
+                                                           initial=light, **fit)
+            albedo, lit = self._divide(columns, radiance, light, usable, extra)
+            joined = BilinearSegmented._assign(labels, albedo, lit, edges, 2.5 * c.segment_threshold)
+            labels = np.where(lit & (joined < regions), joined, -1)
+        tied = lit & (labels >= 0)
+        own = np.maximum(albedo[tied], 1e-12) / np.maximum(region_albedo[labels[tied]], 1e-12)
+        a, b = edges[:, 0], edges[:, 1]
+        inside = tied[a] & tied[b] & (labels[a] == labels[b])
+        neighbours = np.maximum(albedo[a[inside]], 1e-12) / np.maximum(albedo[b[inside]], 1e-12)
+        deviation = float(np.median(np.abs(np.log(own)).mean(axis=1))) if tied.any() else np.inf
+        noise = float(np.median(np.abs(np.log(neighbours)).mean(axis=1))) if inside.any() else 0.0
+        albedo[tied] = region_albedo[labels[tied]]
+        return light, albedo, lit, labels, deviation, deviation / max(noise, 1e-12)
 
     def _reflection(self, prep) -> reflected_light.ReflectedLight:
         """The light the coat reflects, fitted once per solve on the observations before any
