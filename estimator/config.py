@@ -118,16 +118,20 @@ class EstimatorConfig:
         light with exact cast shadows beside the SH light, its direction found by a search
         on the edge fit's robust cost; it is kept when it lowers that cost by at least this
         fraction. 1 turns the search off.
-    reflected_light, reflected_min_explained, reflected_sun_max_ratio : on a texture (no
-        uniform regions), ``retinex-segmented`` takes the light from the coat's reflection
+    reflected_light, reflected_regions, reflected_min_explained, reflected_sun_max_ratio :
+        ``retinex-segmented`` takes the light from the coat's reflection
         (:mod:`estimator.reflected_light`: a 32 x 64 lat-long map fitted to the colours'
-        changes across views, every face's diffuse free, so the texture cannot bias it)
-        instead of the albedo edges, when no sun was kept by the edge search, the map is
-        determined (4 rows per vertex beyond the faces' own unknowns; about 10 at full size) and it explains at
-        least ``reflected_min_explained`` of the view changes in every channel (0.974-0.999
-        where the map's light was the better one, 0.946-0.964 on smooth plastic under grace,
-        hall and lobby, whose small bright sources a 32 x 64 map cannot hold, and 0.51-0.77 on
-        the Phong textured scenes). The map's brightest
+        changes across views, every face's diffuse free, so no albedo can bias it) instead
+        of the albedo edges (and, with ``reflected_regions``, of the uniform regions: each
+        region then takes its faces' median albedo under that light), when no sun was kept
+        by the edge search, the map is determined (4 rows per vertex beyond the faces' own
+        unknowns; about 10 at full size) and it explains at least
+        ``reflected_min_explained`` of the view changes (mean over the channels): 0.986-0.999
+        where the map's light was the better one, 0.976-0.978 under lab's lamps with the
+        smooth coat (the map's light cost 10.8-14.7 dB on the region scenes there, 2.1 dB on
+        the textured one), 0.946-0.964 on smooth plastic under grace, hall and lobby, whose
+        small bright sources a 32 x 64 map cannot hold, and 0.51-0.77 on the Phong textured
+        scenes. The map's brightest
         compact source then becomes a sun with exact shadows, its irradiance fitted to the
         edges, kept when the edge cost ratio is at most ``reflected_sun_max_ratio``
         (0.90-0.96 where it helped on the development scenes, 0.976 on roughplastic/lab
@@ -222,7 +226,8 @@ class EstimatorConfig:
     coat_max_negative: float = 0.005
     sun_min_gain: float = 0.15
     reflected_light: bool = True
-    reflected_min_explained: float = 0.97
+    reflected_regions: bool = True
+    reflected_min_explained: float = 0.982
     reflected_sun_max_ratio: float = 0.97
     robust_loss: str = "auto"
     robust_rounds: int = 2

@@ -568,7 +568,7 @@ class RetinexSegmented(Method):
         self._original_obs = prep.obs
         est = self._fit(prep)
         weight = np.zeros(3)
-        if c.coat_correction and est.info["light_from"] != "reflection":   # that light models the coat already
+        if c.coat_correction and not est.info["light_from"].startswith("reflection"):   # that light models the coat
             obs = prep.obs
             rows = coat.coat_rows(prep.data.mesh.face_normals[obs.face], obs.view_dir,
                                   est.light, c.coat_order, c.coat_ior)
@@ -627,14 +627,18 @@ class RetinexSegmented(Method):
                 light, albedo, lit, labels = tied_fit[:4]
         if light_from == "edges":
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
-            if columns.shape[1] == prep.c_matrix.shape[1] and c.reflected_light and not c.interreflection:
-                r = self._reflection(prep)
-                if r.determined and np.all(r.explained >= c.reflected_min_explained):
-                    radiance = np.where(np.isfinite(r.diffuse) & (r.diffuse > 0), r.diffuse, radiance)
-                    light, columns, reflected_sun = self._reflected_light(prep, radiance, edges, usable, fit)
-                    found = reflected_sun or found
-                    albedo, lit = self._divide(columns, radiance, light, usable, extra)
-                    light_from = "reflection"
+        reflection = self._usable_reflection(prep, columns, regions > 0)
+        if reflection is not None:
+            radiance = np.where(np.isfinite(reflection.diffuse) & (reflection.diffuse > 0), reflection.diffuse, radiance)
+            light, columns, reflected_sun = self._reflected_light(prep, radiance, edges, usable, fit)
+            found = reflected_sun or found
+            albedo, lit = self._divide(columns, radiance, light, usable, extra)
+            light_from = "reflection"
+            if regions:   # each region takes its faces' median albedo under that light
+                labels = np.where(lit, labels, -1)
+                tied = labels >= 0
+                albedo[tied] = group_quantile(labels[tied], albedo[tied], regions, 0.5)[labels[tied]]
+                light_from = "reflection and regions"
         m = prep.c_matrix.shape[1]
         sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
                                                 "evaluations": found.evaluations, "used": columns.shape[1] > m,
@@ -697,6 +701,19 @@ class RetinexSegmented(Method):
         noise = float(np.median(np.abs(np.log(neighbours)).mean(axis=1))) if inside.any() else 0.0
         albedo[tied] = region_albedo[labels[tied]]
         return light, albedo, lit, labels, deviation, deviation / max(noise, 1e-12)
+
+    def _usable_reflection(self, prep, columns, regions: bool) -> reflected_light.ReflectedLight | None:
+        """The coat's reflected light when this fit may use it: ``reflected_light`` on (and
+        ``reflected_regions`` for an object of uniform regions), no interreflection term, no
+        sun kept by the edge search (``columns`` has no sun column), the map determined and
+        explaining at least ``reflected_min_explained`` of the view changes (mean over the
+        channels)."""
+        c = self.config
+        if (not c.reflected_light or (regions and not c.reflected_regions) or c.interreflection
+                or columns.shape[1] != prep.c_matrix.shape[1]):
+            return None
+        r = self._reflection(prep)
+        return r if r.determined and np.mean(r.explained) >= c.reflected_min_explained else None
 
     def _reflection(self, prep) -> reflected_light.ReflectedLight:
         """The light the coat reflects, fitted once per solve on the observations before any

@@ -3,6 +3,8 @@
 Full-size figures are in the closing note of the estimator issue and in
 benchmarks/; here the same properties are asserted at a size that runs in seconds.
 """
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from estimator import sh
 from estimator.config import EstimatorConfig
 from estimator.data import Estimate
 from estimator.methods import REGISTRY, Method, estimate, get_method, register_method
+from estimator.reflected_light import ReflectedLight
 from reports.metrics import adjusted_rand_index
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
@@ -119,3 +122,25 @@ def test_exponent_is_estimated_with_the_lobe_model(tiny_earth_data):
 def test_defiltering_refuses_a_vanishing_filter():
     with pytest.raises(ValueError, match="vanishes"):
         EstimatorConfig(diffuse_light="defiltered", defilter_order=4, phong_exponent=1.0)
+
+
+@pytest.mark.parametrize("flags, explained, determined, sun_column, regions, used", [
+    ({}, [0.99, 0.99, 0.975], True, False, False, True),     # mean 0.985: one channel below is fine
+    ({}, [0.99, 0.99, 0.975], True, False, True, True),      # uniform regions take it too
+    ({"reflected_regions": False}, [0.99] * 3, True, False, True, False),
+    ({"reflected_regions": False}, [0.99] * 3, True, False, False, True),
+    ({}, [0.974, 0.976, 0.977], True, False, False, False),  # lab's lamps under a smooth coat
+    ({}, [0.99] * 3, False, False, False, False),            # not determined
+    ({}, [0.99] * 3, True, True, False, False),              # the edge search kept a sun
+    ({"interreflection": True}, [0.99] * 3, True, False, False, False),
+    ({"reflected_light": False}, [0.99] * 3, True, False, False, False),
+])
+def test_reflected_light_gate(flags, explained, determined, sun_column, regions, used):
+    """retinex-segmented takes the coat's reflected light only when the map is determined,
+    explains at least reflected_min_explained (0.982) of the view changes on the mean over
+    the channels, no sun was kept and the options allow it."""
+    method = get_method("retinex-segmented")(EstimatorConfig(sh_order=2, **flags))
+    method._reflected = ReflectedLight(np.zeros((4, 8, 3)), np.zeros((5, 3)), np.array(explained), 100, determined)
+    prep = SimpleNamespace(c_matrix=np.zeros((5, 9)))
+    columns = np.zeros((5, 10)) if sun_column else prep.c_matrix
+    assert (method._usable_reflection(prep, columns, regions) is method._reflected) == used
