@@ -627,18 +627,19 @@ class RetinexSegmented(Method):
                 light, albedo, lit, labels = tied_fit[:4]
         if light_from == "edges":
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
-        reflection = self._usable_reflection(prep, columns, regions > 0)
+        reflection = self._usable_reflection(prep, regions > 0)
         if reflection is not None:
-            radiance = np.where(np.isfinite(reflection.diffuse) & (reflection.diffuse > 0), reflection.diffuse, radiance)
-            light, columns, reflected_sun = self._reflected_light(prep, radiance, edges, usable, fit)
-            found = reflected_sun or found
-            albedo, lit = self._divide(columns, radiance, light, usable, extra)
-            light_from = "reflection"
-            if regions:   # each region takes its faces' median albedo under that light
-                labels = np.where(lit, labels, -1)
-                tied = labels >= 0
-                albedo[tied] = group_quantile(labels[tied], albedo[tied], regions, 0.5)[labels[tied]]
-                light_from = "reflection and regions"
+            reflected = np.where(np.isfinite(reflection.diffuse) & (reflection.diffuse > 0), reflection.diffuse, radiance)
+            r_light, r_columns, r_sun = self._reflected_light(prep, reflected, edges, usable, fit)
+            if r_sun is not None or columns.shape[1] == prep.c_matrix.shape[1]:   # an edge sun needs a map sun
+                radiance, light, columns, found = reflected, r_light, r_columns, r_sun or found
+                albedo, lit = self._divide(columns, radiance, light, usable, extra)
+                light_from = "reflection"
+                if regions:   # each region takes its faces' median albedo under that light
+                    labels = np.where(lit, labels, -1)
+                    tied = labels >= 0
+                    albedo[tied] = group_quantile(labels[tied], albedo[tied], regions, 0.5)[labels[tied]]
+                    light_from = "reflection and regions"
         m = prep.c_matrix.shape[1]
         sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
                                                 "evaluations": found.evaluations, "used": columns.shape[1] > m,
@@ -702,15 +703,14 @@ class RetinexSegmented(Method):
         albedo[tied] = region_albedo[labels[tied]]
         return light, albedo, lit, labels, deviation, deviation / max(noise, 1e-12)
 
-    def _usable_reflection(self, prep, columns, regions: bool) -> reflected_light.ReflectedLight | None:
+    def _usable_reflection(self, prep, regions: bool) -> reflected_light.ReflectedLight | None:
         """The coat's reflected light when this fit may use it: ``reflected_light`` on (and
-        ``reflected_regions`` for an object of uniform regions), no interreflection term, no
-        sun kept by the edge search (``columns`` has no sun column), the map determined and
-        explaining at least ``reflected_min_explained`` of the view changes (mean over the
-        channels)."""
+        ``reflected_regions`` for an object of uniform regions), no interreflection term, the
+        map determined and explaining at least ``reflected_min_explained`` of the view changes
+        (mean over the channels). Where the edge search kept a sun, :meth:`_fit` takes the
+        map's light only when the map's own sun is kept too."""
         c = self.config
-        if (not c.reflected_light or (regions and not c.reflected_regions) or c.interreflection
-                or columns.shape[1] != prep.c_matrix.shape[1]):
+        if not c.reflected_light or (regions and not c.reflected_regions) or c.interreflection:
             return None
         r = self._reflection(prep)
         return r if r.determined and np.mean(r.explained) >= c.reflected_min_explained else None

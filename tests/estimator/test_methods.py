@@ -124,23 +124,20 @@ def test_defiltering_refuses_a_vanishing_filter():
         EstimatorConfig(diffuse_light="defiltered", defilter_order=4, phong_exponent=1.0)
 
 
-@pytest.mark.parametrize("flags, explained, determined, sun_column, regions, used", [
-    ({}, [0.99, 0.99, 0.975], True, False, False, True),     # mean 0.985: one channel below is fine
-    ({}, [0.99, 0.99, 0.975], True, False, True, True),      # uniform regions take it too
-    ({"reflected_regions": False}, [0.99] * 3, True, False, True, False),
-    ({"reflected_regions": False}, [0.99] * 3, True, False, False, True),
-    ({}, [0.974, 0.976, 0.977], True, False, False, False),  # lab's lamps under a smooth coat
-    ({}, [0.99] * 3, False, False, False, False),            # not determined
-    ({}, [0.99] * 3, True, True, False, False),              # the edge search kept a sun
-    ({"interreflection": True}, [0.99] * 3, True, False, False, False),
-    ({"reflected_light": False}, [0.99] * 3, True, False, False, False),
+@pytest.mark.parametrize("flags, explained, determined, regions, used", [
+    ({}, [0.99, 0.99, 0.975], True, False, True),     # mean 0.985: one channel below is fine
+    ({}, [0.99, 0.99, 0.975], True, True, True),      # uniform regions take it too
+    ({"reflected_regions": False}, [0.99] * 3, True, True, False),
+    ({"reflected_regions": False}, [0.99] * 3, True, False, True),
+    ({}, [0.974, 0.976, 0.977], True, False, False),  # lab's lamps under a smooth coat
+    ({}, [0.99] * 3, False, False, False),            # not determined
+    ({"interreflection": True}, [0.99] * 3, True, False, False),
+    ({"reflected_light": False}, [0.99] * 3, True, False, False),
 ])
-def test_reflected_light_gate(flags, explained, determined, sun_column, regions, used):
+def test_reflected_light_gate(flags, explained, determined, regions, used):
     """retinex-segmented takes the coat's reflected light only when the map is determined,
     explains at least reflected_min_explained (0.982) of the view changes on the mean over
-    the channels, no sun was kept and the options allow it."""
+    the channels and the options allow it."""
     method = get_method("retinex-segmented")(EstimatorConfig(sh_order=2, **flags))
     method._reflected = ReflectedLight(np.zeros((4, 8, 3)), np.zeros((5, 3)), np.array(explained), 100, determined)
-    prep = SimpleNamespace(c_matrix=np.zeros((5, 9)))
-    columns = np.zeros((5, 10)) if sun_column else prep.c_matrix
-    assert (method._usable_reflection(prep, columns, regions) is method._reflected) == used
+    assert (method._usable_reflection(SimpleNamespace(), regions) is method._reflected) == used
