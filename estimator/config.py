@@ -118,7 +118,7 @@ class EstimatorConfig:
         light with exact cast shadows beside the SH light, its direction found by a search
         on the edge fit's robust cost; it is kept when it lowers that cost by at least this
         fraction. 1 turns the search off.
-    reflected_light, reflected_regions, reflected_min_explained, reflected_sun_max_ratio :
+    reflected_light, reflected_regions, reflected_min_explained, reflected_sun_max_ratio, reflected_sun_max_angle :
         ``retinex-segmented`` takes the light from the coat's reflection
         (:mod:`estimator.reflected_light`: a 32 x 64 lat-long map fitted to the colours'
         changes across views, every face's diffuse free, so no albedo can bias it) instead
@@ -132,8 +132,11 @@ class EstimatorConfig:
         the textured one), 0.946-0.964 on smooth plastic under grace, hall and lobby, whose
         small bright sources a 32 x 64 map cannot hold, and 0.51-0.77 on the Phong textured
         scenes. Where the edge search kept a sun, the map's light replaces it only when the
-        map's own sun is kept too (the whole map cannot hold a studio's lamps: smooth plastic
-        under studio fell from 33.9-54.2 to 10.3-12.5 dB with it). The map's brightest
+        map's own sun is kept too, within ``reflected_sun_max_angle`` degrees of it (about a
+        map cell; the whole map cannot hold a studio's lamps: smooth plastic under studio fell
+        from 33.9-54.2 to 10.3-12.5 dB with it; agreeing suns were 0.6-2.5 degrees apart, and a
+        sun 16 degrees high came out of the map 13.6 degrees low, costing plastic/sunsky-low
+        22 dB). The map's brightest
         compact source then becomes a sun with exact shadows, its irradiance fitted to the
         edges, kept when the edge cost ratio is at most ``reflected_sun_max_ratio``
         (0.90-0.96 where it helped on the development scenes, 0.976 on roughplastic/lab
@@ -231,6 +234,7 @@ class EstimatorConfig:
     reflected_regions: bool = True
     reflected_min_explained: float = 0.982
     reflected_sun_max_ratio: float = 0.97
+    reflected_sun_max_angle: float = 6.0
     robust_loss: str = "auto"
     robust_rounds: int = 2
     glint_ratio: float = 4.0
@@ -277,6 +281,7 @@ class EstimatorConfig:
              "region_max_deviation and region_max_drift must be > 0"),
             (0 <= self.reflected_min_explained <= 1, "reflected_min_explained must lie in [0, 1]"),
             (self.reflected_sun_max_ratio >= 0, "reflected_sun_max_ratio must be >= 0"),
+            (0 <= self.reflected_sun_max_angle <= 180, "reflected_sun_max_angle must lie in [0, 180] degrees"),
             (self.coat_ior > 1, "coat_ior must be > 1"),
             (0 <= self.coat_min_share < 1, "coat_min_share must lie in [0, 1)"),
             (0 <= self.coat_max_negative < 1, "coat_max_negative must lie in [0, 1)"),

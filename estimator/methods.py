@@ -631,7 +631,9 @@ class RetinexSegmented(Method):
         if reflection is not None:
             reflected = np.where(np.isfinite(reflection.diffuse) & (reflection.diffuse > 0), reflection.diffuse, radiance)
             r_light, r_columns, r_sun = self._reflected_light(prep, reflected, edges, usable, fit)
-            if r_sun is not None or columns.shape[1] == prep.c_matrix.shape[1]:   # an edge sun needs a map sun
+            edge_sun = columns.shape[1] > prep.c_matrix.shape[1]
+            if not edge_sun or (r_sun is not None and np.degrees(np.arccos(np.clip(
+                    r_sun.direction @ found.direction, -1.0, 1.0))) <= c.reflected_sun_max_angle):
                 radiance, light, columns, found = reflected, r_light, r_columns, r_sun or found
                 albedo, lit = self._divide(columns, radiance, light, usable, extra)
                 light_from = "reflection"
