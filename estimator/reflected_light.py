@@ -31,7 +31,6 @@ import numpy as np
 from scipy import sparse
 
 from . import latlong, robust, sh
-from .coat import fresnel_dielectric
 from .errors import InputError
 from .reflection import fresnel_dielectric, mirror_directions
 from .visibility import SphereSampling, Visibility

@@ -4,12 +4,11 @@ import numpy as np
 import pytest
 
 from estimator import sh
-from estimator.coat import fresnel_dielectric
 from estimator.config import EstimatorConfig
 from estimator.models import reflection_model
 from estimator.data import TriangleMesh
 from estimator.raycast import RayCaster
-from estimator.reflection import diffuse_matrix
+from estimator.reflection import diffuse_matrix, fresnel_dielectric
 from estimator.retinex import log_shading_fit
 from estimator.sun import brightest_direction, find_sun, sun_shading
 from estimator.visibility import compute_visibility, sphere_sampling
