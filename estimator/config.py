@@ -144,6 +144,15 @@ class EstimatorConfig:
         coat's reflection removed, its exit transmission divided out) over a shading through
         the coat (the cosine weighted by 1 - F on the way in, as Mitsuba's ``plastic``).
         Textured scenes (9, full size): median 23.6 -> 32.7 dB.
+    reflected_lobe : where the coat's map fails its gate on a texture, ``retinex-segmented``
+        tries the light a shared Phong lobe of exponent ``phong_exponent`` reflects
+        (:mod:`estimator.lobe_light`: SH radiance fitted to the colours' changes across views,
+        every face's diffuse free, no Fresnel), used when it explains at least
+        ``reflected_min_explained`` of the view changes (0.998-0.9998 on the Phong textured
+        scenes with a white specular of 0.2; 0.24-0.93 on plastic, roughplastic and a bare
+        diffuse texture). Its DC, which the views cannot fix, is the one whose albedos vary
+        least across the edges (:func:`estimator.lobe_light.dc_from_edges`); a sun the edge
+        search kept joins the fit as a delta light in both terms.
     ad_time_budget, ad_resolution, ad_spp, ad_learning_rate, ad_envmap_height : the
         ``mitsuba-ad`` peer: wall-clock seconds of Adam steps, the rendered width it aims at
         (the views are box-averaged by an integer factor), samples per pixel, Adam's
@@ -235,6 +244,7 @@ class EstimatorConfig:
     reflected_min_explained: float = 0.982
     reflected_sun_max_ratio: float = 0.97
     reflected_sun_max_angle: float = 6.0
+    reflected_lobe: bool = True
     robust_loss: str = "auto"
     robust_rounds: int = 2
     glint_ratio: float = 4.0

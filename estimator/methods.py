@@ -9,13 +9,14 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import albedo_prior, coat, indirect, pose, reflected_light, retinex, robust, sh, sun, trust
+from . import albedo_prior, coat, indirect, lobe_light, pose, reflected_light, retinex, robust, sh, sun, trust
 from .clustering import mean_shift, split_clusters
 from .config import EstimatorConfig
 from .data import Estimate, MultiViewData
 from .models import reflection_model
 from .pipeline import Prepared, prepare, with_config
 from .raycast import RayCaster
+from .reflection import diffuse_matrix, lobe_matrix, mirror_directions
 from .segmentation import albedo_features, group_quantile, segment
 from .solver import BilinearResult, solve_bilinear
 from .errors import InputError
@@ -565,6 +566,7 @@ class RetinexSegmented(Method):
                              "data (components='specular') use bilinear-per-face")
         t = time.perf_counter()
         self._reflected = None   # the coat's reflected light, fitted on first need from these observations
+        self._lobe = None        # the lobe's (LobeLight, lobe rows), likewise
         self._original_obs = prep.obs
         est = self._fit(prep)
         weight = np.zeros(3)
@@ -627,7 +629,9 @@ class RetinexSegmented(Method):
                 light, albedo, lit, labels = tied_fit[:4]
         if light_from == "edges":
             regions, labels = 0, np.full(f, -1, dtype=np.int64)
-        reflection = self._usable_reflection(prep, regions > 0)
+        reflection, lobe = self._usable_reflection(prep, regions > 0), self._usable_lobe(prep)
+        if reflection is not None and lobe is not None and np.mean(lobe.explained) > np.mean(reflection.explained):
+            reflection = None     # a lobe without Fresnel explains the view changes better than a coat
         if reflection is not None:
             reflected = np.where(np.isfinite(reflection.diffuse) & (reflection.diffuse > 0), reflection.diffuse, radiance)
             r_light, r_columns, r_sun = self._reflected_light(prep, reflected, edges, usable, fit)
@@ -642,6 +646,27 @@ class RetinexSegmented(Method):
                     tied = labels >= 0
                     albedo[tied] = group_quantile(labels[tied], albedo[tied], regions, 0.5)[labels[tied]]
                     light_from = "reflection and regions"
+        elif lobe is not None:
+            edge_sun = found
+            radiance, light, columns, ratio = self._lobe_reflected_light(prep, edges, usable, edge_sun)
+            found = (sun.Sun(edge_sun.direction, ratio, edge_sun.evaluations)   # no coat on its way
+                     if columns.shape[1] > prep.c_matrix.shape[1] else None)
+            albedo, lit = self._divide(columns, radiance, light, usable, extra)
+            light_from = "reflection (lobe)"
+            # regions found under the edges' light saw the lobe's reflection as albedo: found again
+            labels, _ = segment(np.where(lit[:, None], albedo, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
+            share, regions = float(np.mean(labels[lit] >= 0)), int(labels.max()) + 1
+            deviation = drift = None
+            if regions and share >= c.retinex_min_uniform_share:
+                tied = labels >= 0
+                median = group_quantile(labels[tied], albedo[tied], regions, 0.5)
+                deviation = float(np.median(np.abs(np.log(np.maximum(albedo[tied], 1e-12)
+                                                          / np.maximum(median[labels[tied]], 1e-12))).mean(axis=1)))
+                if deviation <= c.region_max_deviation:
+                    albedo[tied] = median[labels[tied]]
+                    light_from = "reflection (lobe) and regions"
+            if light_from == "reflection (lobe)":
+                regions, labels = 0, np.full(f, -1, dtype=np.int64)
         m = prep.c_matrix.shape[1]
         sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
                                                 "evaluations": found.evaluations, "used": columns.shape[1] > m,
@@ -669,6 +694,7 @@ class RetinexSegmented(Method):
                 "uniform_share": share, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
                 "sun": sun_info, "light_from": light_from, "region_deviation": deviation, "region_drift": drift,
                 "reflection_explained": None if self._reflected is None else self._reflected.explained.tolist(),
+                "lobe_explained": None if self._lobe is None else self._lobe[0].explained.tolist(),
                 "degrees_of_freedom": {"observations": int(3 * len(obs.face)),
                                        "unknowns": int(3 * (per_group * (regions + (~(labels >= 0) & observed).sum())
                                                             + light.shape[0] - 1))}}
@@ -759,6 +785,72 @@ class RetinexSegmented(Method):
             return (np.vstack([sky, with_sun[None]]), np.hstack([through_coat, sun_column[:, None]]), found)
         whole = self.model.unknown_from_radiance(self._reflected.sh(c.sh_order))
         return whole / whole[0], through_coat, None
+
+    def _usable_lobe(self, prep) -> lobe_light.LobeLight | None:
+        """The light a shared Phong lobe reflects (:mod:`estimator.lobe_light`), fitted once
+        per solve on the observations before any coat correction, when ``reflected_lobe`` is
+        on, there is no interreflection term, the rows fit in memory and it explains at least
+        ``reflected_min_explained`` of the view changes (mean over the channels)."""
+        c = self.config
+        if not c.reflected_lobe or c.interreflection or prep.streamed:
+            return None
+        if self._lobe is None:
+            obs = self._original_obs
+            if prep.model.name == "lobe" and obs is prep.obs:
+                rows = prep.d_rows
+            else:
+                normals = prep.data.mesh.face_normals[obs.face]
+                rows = lobe_matrix(obs.face, mirror_directions(normals, obs.view_dir), prep.sampling,
+                                   prep.visibility, c.sh_order, c.phong_exponent)
+            self._lobe = (lobe_light.fit_lobe_light(obs.face, obs.rgb, rows, obs.num_faces, loss=self.loss), rows)
+        fitted = self._lobe[0]
+        return fitted if np.mean(fitted.explained) >= c.reflected_min_explained else None
+
+    def _lobe_reflected_light(self, prep, edges, usable, found: sun.Sun | None):
+        """The texture's light from the lobe's reflection: the SH radiance, its DC from the
+        edges (:func:`estimator.lobe_light.dc_from_edges`). The edge search's sun, whether
+        or not that search kept it, is tried as a delta light in both terms (its lobe column
+        in the view fit, its exact shadows in the shading) and kept when its irradiance is
+        positive in every channel and it lowers the edges' robust cost to at most
+        ``reflected_sun_max_ratio`` of the cost without it.
+
+        Returns each face's diffuse radiance (F, 3) (negative clipped to 0), the light (M', 3)
+        (the model's light unknown, the sun's irradiance last when kept), the shading columns
+        (F, M') and the sun's edge cost ratio (None: no sun tried)."""
+        c, mesh = self.config, prep.data.mesh
+        fitted, rows = self._lobe
+        plain = diffuse_matrix(mesh, prep.sampling, prep.visibility, c.sh_order)   # rows of the radiance
+
+        def split(fit, shading_rows):
+            light, diffuse = fit.with_dc(lobe_light.dc_from_edges(fit, shading_rows, edges, usable))
+            return light, np.maximum(np.nan_to_num(diffuse), 0.0), shading_rows
+
+        light, diffuse, plain = chosen = split(fitted, plain)
+        sun_column, ratio = None, None
+        if found is not None:
+            obs = self._original_obs
+            shading = sun.sun_shading(mesh, prep.caster, found.direction)
+            cosine = np.maximum(mesh.face_normals @ found.direction, 0.0)
+            share = np.where(cosine > 0, shading * np.pi / np.maximum(cosine, 1e-300), 0.0)   # lit share
+            mirror = mirror_directions(mesh.face_normals[obs.face], obs.view_dir)
+            lobe = (c.phong_exponent + 1.0) / (2.0 * np.pi) * np.maximum(mirror @ found.direction, 0.0) ** c.phong_exponent
+            with_sun = lobe_light.fit_lobe_light(obs.face, obs.rgb, np.hstack([rows, (lobe * share[obs.face])[:, None]]),
+                                                 obs.num_faces, loss=self.loss)
+            if np.all(with_sun.light[-1] > 0):
+                s_light, s_diffuse, s_plain = trial = split(with_sun, np.hstack([plain, shading[:, None]]))
+                base = retinex.edge_residuals(diffuse, plain @ light, edges, usable)
+                other = retinex.edge_residuals(s_diffuse, np.maximum(s_plain @ s_light, 1e-300), edges, usable)
+                finite = np.all(np.isfinite(base), axis=1) & np.all(np.isfinite(other), axis=1)
+                scale = sun.edge_scale(base[finite])
+                ratio = sun.edge_cost(other[finite], scale) / max(sun.edge_cost(base[finite], scale), 1e-300)
+                if ratio <= c.reflected_sun_max_ratio:
+                    chosen, sun_column = trial, shading
+        light, diffuse, _ = chosen
+        m = prep.c_matrix.shape[1]
+        columns = self.model.diffuse_matrix(mesh, prep.sampling, prep.visibility)
+        if sun_column is not None:
+            columns = np.hstack([columns, sun_column[:, None]])
+        return diffuse, np.vstack([self.model.unknown_from_radiance(light[:m]), light[m:]]), columns, ratio
 
     @staticmethod
     def _divide(columns, radiance, light, usable, extra=0.0) -> tuple[np.ndarray, np.ndarray]:
