@@ -149,10 +149,11 @@ class EstimatorConfig:
         (:mod:`estimator.lobe_light`: SH radiance fitted to the colours' changes across views,
         every face's diffuse free, no Fresnel), used when it explains at least
         ``reflected_min_explained`` of the view changes (0.998-0.9998 on the Phong textured
-        scenes with a white specular of 0.2; 0.24-0.93 on plastic, roughplastic and a bare
+        scenes with a white specular of 0.2; 0.24-0.93 on plastic and roughplastic, 0.01 on a bare
         diffuse texture). Its DC, which the views cannot fix, is the one whose albedos vary
-        least across the edges (:func:`estimator.lobe_light.dc_from_edges`); a sun the edge
-        search kept joins the fit as a delta light in both terms.
+        least across the edges (:func:`estimator.lobe_light.dc_from_edges`); the edge search's
+        sun (kept by that search or not) joins both terms as a delta light when its
+        irradiance is positive and it lowers the edges' cost to ``reflected_sun_max_ratio``.
     ad_time_budget, ad_resolution, ad_spp, ad_learning_rate, ad_envmap_height : the
         ``mitsuba-ad`` peer: wall-clock seconds of Adam steps, the rendered width it aims at
         (the views are box-averaged by an integer factor), samples per pixel, Adam's
