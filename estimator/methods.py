@@ -553,7 +553,12 @@ class RetinexSegmented(Method):
     ``reflected_min_explained`` of the view changes; step 6 is then skipped. The albedo is
     then that fit's diffuse radiance (the coat's reflection removed, its exit transmission
     1 - F(n . v) divided out) over the light's shading through the coat (the cosine weighted
-    by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``).
+    by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``). Where the map's light fails
+    that gate but the map explains at least ``reflected_diffuse_min_explained``, the light
+    still comes from the edges, fitted on that diffuse radiance through the coat. Where a
+    shared Phong lobe without Fresnel explains the view changes better than the coat
+    (``reflected_lobe``), the light comes from the lobe's reflection
+    (:mod:`estimator.lobe_light`) and regions are found again under it.
     """
 
     name = "retinex-segmented"
@@ -667,6 +672,15 @@ class RetinexSegmented(Method):
                     light_from = "reflection (lobe) and regions"
             if light_from == "reflection (lobe)":
                 regions, labels = 0, np.full(f, -1, dtype=np.int64)
+        if light_from == "edges" and not regions:
+            coated = self._coated_diffuse(prep, radiance, columns, found)
+            if coated is not None:   # the edges' light, on radiance with the coat's reflection removed
+                radiance, columns = coated
+                if columns.shape[1] > prep.c_matrix.shape[1]:
+                    found = sun.Sun(found.direction, found.cost_ratio, found.evaluations, c.coat_ior)
+                light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
+                albedo, lit = self._divide(columns, radiance, light, usable, extra)
+                light_from = "reflection's diffuse, edges' light"
         m = prep.c_matrix.shape[1]
         sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
                                                 "evaluations": found.evaluations, "used": columns.shape[1] > m,
@@ -742,6 +756,24 @@ class RetinexSegmented(Method):
             return None
         r = self._reflection(prep)
         return r if r.determined and np.mean(r.explained) >= c.reflected_min_explained else None
+
+    def _coated_diffuse(self, prep, radiance, columns, found: sun.Sun | None):
+        """Each face's diffuse radiance from the coat's map fit (its reflection removed, the
+        exit transmission divided out) and the shading columns through the coat (the edge
+        search's sun through it too, when kept), where the map's light itself failed its gate
+        but the map is determined and explains at least ``reflected_diffuse_min_explained``
+        of the view changes; None otherwise. Faces the map fit did not see keep ``radiance``."""
+        c = self.config
+        if not c.reflected_light or c.interreflection:
+            return None
+        r = self._reflection(prep)
+        if not r.determined or np.mean(r.explained) < c.reflected_diffuse_min_explained:
+            return None
+        mesh = prep.data.mesh
+        through = self.model.diffuse_matrix(mesh, prep.sampling, prep.visibility, coat_ior=c.coat_ior)
+        if columns.shape[1] > prep.c_matrix.shape[1]:
+            through = np.hstack([through, sun.sun_shading(mesh, prep.caster, found.direction, c.coat_ior)[:, None]])
+        return np.where(np.isfinite(r.diffuse) & (r.diffuse > 0), r.diffuse, radiance), through
 
     def _reflection(self, prep) -> reflected_light.ReflectedLight:
         """The light the coat reflects, fitted once per solve on the observations before any

@@ -141,3 +141,33 @@ def test_reflected_light_gate(flags, explained, determined, regions, used):
     method = get_method("retinex-segmented")(EstimatorConfig(sh_order=2, **flags))
     method._reflected = ReflectedLight(np.zeros((4, 8, 3)), np.zeros((5, 3)), np.array(explained), 100, determined)
     assert (method._usable_reflection(SimpleNamespace(), regions) is method._reflected) == used
+
+
+@pytest.mark.parametrize("flags, explained, determined, used", [
+    ({}, [0.974, 0.976, 0.977], True, True),      # lab's lamps: the map's light fails, its diffuse serves
+    ({}, [0.958, 0.952, 0.952], True, True),      # grace's windows
+    ({}, [0.6, 0.77, 0.5], True, False),          # no coat (a Phong or bare texture)
+    ({}, [0.99] * 3, False, False),               # not determined
+    ({"interreflection": True}, [0.99] * 3, True, False),
+    ({"reflected_light": False}, [0.99] * 3, True, False),
+])
+def test_coated_diffuse_gate(flags, explained, determined, used):
+    """Where the map's light fails its gate, retinex-segmented still takes the map's diffuse
+    (the coat's reflection removed) under the edges' light, when the map is determined and
+    explains at least reflected_diffuse_min_explained (0.9); faces the map did not see keep
+    their own radiance, and the shading goes through the coat."""
+    method = get_method("retinex-segmented")(EstimatorConfig(sh_order=2, **flags))
+    diffuse = np.full((5, 3), 0.3)
+    diffuse[4] = np.nan
+    method._reflected = ReflectedLight(np.zeros((4, 8, 3)), diffuse, np.array(explained), 100, determined)
+    through = np.full((5, 9), 0.7)
+    prep = SimpleNamespace(data=SimpleNamespace(mesh=None), sampling=None, visibility=None, c_matrix=np.ones((5, 9)),
+                           caster=None)
+    method.model = SimpleNamespace(diffuse_matrix=lambda mesh, sampling, visibility, coat_ior=None: through * (coat_ior or 0))
+    radiance = np.full((5, 3), 0.5)
+    out = method._coated_diffuse(prep, radiance, prep.c_matrix, None)
+    assert (out is not None) == used
+    if used:
+        np.testing.assert_allclose(out[0][:4], 0.3)
+        np.testing.assert_allclose(out[0][4], 0.5)
+        np.testing.assert_allclose(out[1], through * method.config.coat_ior)
