@@ -644,8 +644,12 @@ class RetinexSegmented(Method):
             if not edge_sun or (r_sun is not None and np.degrees(np.arccos(np.clip(
                     r_sun.direction @ found.direction, -1.0, 1.0))) <= c.reflected_sun_max_angle):
                 radiance, light, columns, found = reflected, r_light, r_columns, r_sun or found
-                albedo, lit = self._divide(columns, radiance, light, usable, extra)
                 light_from = "reflection"
+                if not regions:   # a texture: the map's diffuse and sun, the edges' SH light on them
+                    edge_light, _ = retinex.log_shading_fit(radiance, columns, edges, usable, **fit)
+                    if columns.shape[1] == prep.c_matrix.shape[1] or np.all(edge_light[-1] > 0):   # no dark sun
+                        light, light_from = edge_light, "reflection's diffuse, edges' light"
+                albedo, lit = self._divide(columns, radiance, light, usable, extra)
                 if regions:   # each region takes its faces' median albedo under that light
                     labels = np.where(lit, labels, -1)
                     tied = labels >= 0
