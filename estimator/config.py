@@ -152,7 +152,9 @@ class EstimatorConfig:
         windows 0.952-0.958; Phong and bare textures 0.5-0.77): the map's light errs where a
         source is narrower than a cell, but its reflection removed per view is still closer
         to the diffuse radiance than a low quantile of the colours. Textured plastic/lab
-        30.4 -> 34.0 dB, plastic/grace 29.1 -> 34.4.
+        30.4 -> 34.0 dB, plastic/grace 29.1 -> 34.4. (Where the map's light passes its gate
+        on a texture, its SH part is likewise replaced by the edges' fit on that diffuse,
+        beside the map's sun.)
     reflected_lobe : where the coat's map fails its gate on a texture, ``retinex-segmented``
         tries the light a shared Phong lobe of exponent ``phong_exponent`` reflects
         (:mod:`estimator.lobe_light`: SH radiance fitted to the colours' changes across views,

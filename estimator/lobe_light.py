@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
 from . import retinex, robust, sun
 from .errors import InputError
@@ -93,9 +94,8 @@ def fit_lobe_light(face: np.ndarray, rgb: np.ndarray, lobe_rows: np.ndarray, num
         raise InputError(f"observation faces must lie in [0, {num_faces})")
     count = np.bincount(face, minlength=num_faces).astype(float)
     inverse = np.where(count > 0, 1.0 / np.maximum(count, 1.0), np.nan)
-    mean_rows = np.zeros((num_faces, m))
-    np.add.at(mean_rows, face, lobe_rows)
-    mean_rows *= np.nan_to_num(inverse)[:, None]
+    faces_of_rows = sparse.csr_matrix((np.ones(n), (face, np.arange(n))), shape=(num_faces, n))   # (F, N)
+    mean_rows = (faces_of_rows @ lobe_rows) * np.nan_to_num(inverse)[:, None]
     varying = lobe_rows[:, 1:] - mean_rows[face, 1:]                 # the DC column is fixed to zero
     light = np.zeros((m, 3))
     explained = np.zeros(3)

@@ -553,7 +553,8 @@ class RetinexSegmented(Method):
     ``reflected_min_explained`` of the view changes; step 6 is then skipped. The albedo is
     then that fit's diffuse radiance (the coat's reflection removed, its exit transmission
     1 - F(n . v) divided out) over the light's shading through the coat (the cosine weighted
-    by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``). Where the map's light fails
+    by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``); on a texture the light's SH
+    part is fitted to the edges of that diffuse radiance, beside the map's sun. Where the map's light fails
     that gate but the map explains at least ``reflected_diffuse_min_explained``, the light
     still comes from the edges, fitted on that diffuse radiance through the coat. Where a
     shared Phong lobe without Fresnel explains the view changes better than the coat
@@ -835,12 +836,24 @@ class RetinexSegmented(Method):
             if prep.model.name == "lobe" and obs is prep.obs:
                 rows = prep.d_rows
             else:
-                normals = prep.data.mesh.face_normals[obs.face]
-                rows = lobe_matrix(obs.face, mirror_directions(normals, obs.view_dir), prep.sampling,
-                                   prep.visibility, c.sh_order, c.phong_exponent)
+                # a first fit on every LOBE_PREVIEW-th face: a coat or a bare surface (0.01-0.93) is
+                # far below the gate and costs no more (about 1.5 s at full size for the whole fit)
+                part = obs.face % LOBE_PREVIEW == 0
+                preview = lobe_light.fit_lobe_light(obs.face[part], obs.rgb[part], self._lobe_rows(prep, obs, part),
+                                                    obs.num_faces, loss=self.loss)
+                if np.mean(preview.explained) < c.reflected_min_explained - 0.05:
+                    self._lobe = (preview, None)
+                    return None
+                rows = self._lobe_rows(prep, obs, np.ones(len(obs.face), bool))
             self._lobe = (lobe_light.fit_lobe_light(obs.face, obs.rgb, rows, obs.num_faces, loss=self.loss), rows)
         fitted = self._lobe[0]
-        return fitted if np.mean(fitted.explained) >= c.reflected_min_explained else None
+        return fitted if self._lobe[1] is not None and np.mean(fitted.explained) >= c.reflected_min_explained else None
+
+    def _lobe_rows(self, prep, obs, rows: np.ndarray) -> np.ndarray:
+        """(n, M) the Phong lobe rows (exponent ``phong_exponent``) of the observations ``rows`` (N,) bool."""
+        normals = prep.data.mesh.face_normals[obs.face[rows]]
+        return lobe_matrix(obs.face[rows], mirror_directions(normals, obs.view_dir[rows]), prep.sampling,
+                           prep.visibility, self.config.sh_order, self.config.phong_exponent)
 
     def _lobe_reflected_light(self, prep, edges, usable, found: sun.Sun | None):
         """The texture's light from the lobe's reflection: the SH radiance, its DC from the
@@ -900,6 +913,9 @@ class RetinexSegmented(Method):
         with np.errstate(divide="ignore", invalid="ignore"):
             albedo = np.where(lit[:, None], radiance / np.where(shade > 0, shade, 1.0), 0.0)
         return albedo, lit
+
+
+LOBE_PREVIEW = 4   # the lobe's gate is first tried on every 4th face
 
 
 def _same_partition(a: np.ndarray, b: np.ndarray) -> bool:
