@@ -303,6 +303,7 @@ class EstimatorConfig:
             (self.region_max_deviation > 0 and self.region_max_drift > 0,
              "region_max_deviation and region_max_drift must be > 0"),
             (0 <= self.reflected_min_explained <= 1, "reflected_min_explained must lie in [0, 1]"),
+            (0 <= self.reflected_diffuse_min_explained <= 1, "reflected_diffuse_min_explained must lie in [0, 1]"),
             (self.reflected_sun_max_ratio >= 0, "reflected_sun_max_ratio must be >= 0"),
             (0 <= self.reflected_sun_max_angle <= 180, "reflected_sun_max_angle must lie in [0, 180] degrees"),
             (self.coat_ior > 1, "coat_ior must be > 1"),

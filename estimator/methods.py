@@ -554,9 +554,10 @@ class RetinexSegmented(Method):
     then that fit's diffuse radiance (the coat's reflection removed, its exit transmission
     1 - F(n . v) divided out) over the light's shading through the coat (the cosine weighted
     by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``); on a texture the light's SH
-    part is fitted to the edges of that diffuse radiance, beside the map's sun. Where the map's light fails
-    that gate but the map explains at least ``reflected_diffuse_min_explained``, the light
-    still comes from the edges, fitted on that diffuse radiance through the coat. Where a
+    part is fitted to the edges of that diffuse radiance, beside the map's sun. Where the
+    map's light fails that gate but the map explains at least
+    ``reflected_diffuse_min_explained``, the light still comes from the edges, fitted on
+    that diffuse radiance through the coat. Where a
     shared Phong lobe without Fresnel explains the view changes better than the coat
     (``reflected_lobe``), the light comes from the lobe's reflection
     (:mod:`estimator.lobe_light`) and regions are found again under it.
@@ -572,7 +573,7 @@ class RetinexSegmented(Method):
                              "data (components='specular') use bilinear-per-face")
         t = time.perf_counter()
         self._reflected = None   # the coat's reflected light, fitted on first need from these observations
-        self._lobe = None        # the lobe's (LobeLight, lobe rows), likewise
+        self._lobe = None        # the lobe's (LobeLight, lobe rows or None after a failed preview), likewise
         self._original_obs = prep.obs
         est = self._fit(prep)
         weight = np.zeros(3)

@@ -103,6 +103,10 @@ def test_config_validation():
         EstimatorConfig(min_cos_view=1.5)
     with pytest.raises(ValueError, match="diffuse_light"):
         EstimatorConfig(diffuse_light="true")
+    with pytest.raises(ValueError, match="reflected_diffuse_min_explained"):
+        EstimatorConfig(reflected_diffuse_min_explained=1.2)
+    with pytest.raises(ValueError, match="reflected_lobe"):
+        EstimatorConfig(reflected_lobe=1)
 
 
 def test_exponent_is_estimated_with_the_lobe_model(tiny_earth_data):
