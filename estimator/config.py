@@ -130,8 +130,8 @@ class EstimatorConfig:
         where the map's light was the better one, 0.976-0.978 under lab's lamps with the
         smooth coat (the map's light cost 10.8-14.7 dB on the region scenes there, 2.1 dB on
         the textured one), 0.946-0.964 on smooth plastic under grace, hall and lobby, whose
-        small bright sources a 32 x 64 map cannot hold, and 0.51-0.77 on the Phong textured
-        scenes. Where the edge search kept a sun, the map's light replaces it only when the
+        small bright sources a 32 x 64 map cannot hold, and 0.51-0.77 on a bare (specular-free)
+        texture. Where the edge search kept a sun, the map's light replaces it only when the
         map's own sun is kept too, within ``reflected_sun_max_angle`` degrees of it (about a
         map cell; the whole map cannot hold a studio's lamps: smooth plastic under studio fell
         from 33.9-54.2 to 10.3-12.5 dB with it; agreeing suns were 0.6-2.5 degrees apart, and a
@@ -155,13 +155,14 @@ class EstimatorConfig:
         30.4 -> 34.0 dB, plastic/grace 29.1 -> 34.4. (Where the map's light passes its gate
         on a texture, its SH part is likewise replaced by the edges' fit on that diffuse,
         beside the map's sun.)
-    reflected_lobe : where the coat's map fails its gate on a texture, ``retinex-segmented``
-        tries the light a shared Phong lobe of exponent ``phong_exponent`` reflects
-        (:mod:`estimator.lobe_light`: SH radiance fitted to the colours' changes across views,
-        every face's diffuse free, no Fresnel), used when it explains at least
-        ``reflected_min_explained`` of the view changes (0.998-0.9998 on the Phong textured
-        scenes with a white specular of 0.2; 0.24-0.93 on plastic and roughplastic, 0.01 on a bare
-        diffuse texture). Its DC, which the views cannot fix, is the one whose albedos vary
+    reflected_lobe : ``retinex-segmented`` also tries the light a shared Phong lobe of
+        exponent ``phong_exponent`` reflects (:mod:`estimator.lobe_light`: SH radiance fitted
+        to the colours' changes across views, every face's diffuse free, no Fresnel), first on
+        every 4th face, and takes it when it explains at least ``reflected_min_explained`` of
+        the view changes and more than the coat's map (lobe 0.998-0.9998 on the Phong textured
+        scenes with a white specular of 0.2, where the map explains 0.979-0.994; 0.27 on smooth
+        plastic/lab, 0.81-0.93 on roughplastic/park, 0.01 on a bare diffuse texture); uniform
+        regions are then found again under it. Its DC, which the views cannot fix, is the one whose albedos vary
         least across the edges (:func:`estimator.lobe_light.dc_from_edges`); the edge search's
         sun (kept by that search or not) joins both terms as a delta light when its
         irradiance is positive and it lowers the edges' cost to ``reflected_sun_max_ratio``.

@@ -97,10 +97,11 @@ def fit_lobe_light(face: np.ndarray, rgb: np.ndarray, lobe_rows: np.ndarray, num
     faces_of_rows = sparse.csr_matrix((np.ones(n), (face, np.arange(n))), shape=(num_faces, n))   # (F, N)
     mean_rows = (faces_of_rows @ lobe_rows) * np.nan_to_num(inverse)[:, None]
     varying = lobe_rows[:, 1:] - mean_rows[face, 1:]                 # the DC column is fixed to zero
+    changes = rgb - ((faces_of_rows @ rgb) * np.nan_to_num(inverse)[:, None])[face]   # each face's mean removed
     light = np.zeros((m, 3))
     explained = np.zeros(3)
     for c in range(3):
-        y = rgb[:, c] - (np.bincount(face, rgb[:, c], minlength=num_faces) * np.nan_to_num(inverse))[face]
+        y = changes[:, c]
         weights = np.ones(n)
         for _ in range(max(rounds, 1)):
             normal = varying.T @ (weights[:, None] * varying)
@@ -110,9 +111,8 @@ def fit_lobe_light(face: np.ndarray, rgb: np.ndarray, lobe_rows: np.ndarray, num
             weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual), floor=1e-12))
         total = np.sum(weights * y ** 2)
         explained[c] = 1.0 - np.sum(weights * residual ** 2) / total if total > 0 else 0.0
-    reflected = lobe_rows @ light
-    diffuse = np.stack([np.bincount(face, rgb[:, c] - reflected[:, c], minlength=num_faces) for c in range(3)], 1)
-    return LobeLight(light, diffuse * inverse[:, None], mean_rows[:, 0], explained, n)
+    diffuse = (faces_of_rows @ (rgb - lobe_rows @ light)) * inverse[:, None]
+    return LobeLight(light, diffuse, mean_rows[:, 0], explained, n)
 
 
 def dc_from_edges(lobe: LobeLight, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,

@@ -16,7 +16,7 @@ from .data import Estimate, MultiViewData
 from .models import reflection_model
 from .pipeline import Prepared, prepare, with_config
 from .raycast import RayCaster
-from .reflection import diffuse_matrix, lobe_matrix, mirror_directions
+from .reflection import diffuse_matrix, lobe_matrix, mirror_directions, phong_lobe
 from .segmentation import albedo_features, group_quantile, segment
 from .solver import BilinearResult, solve_bilinear
 from .errors import InputError
@@ -671,8 +671,7 @@ class RetinexSegmented(Method):
             if regions and share >= c.retinex_min_uniform_share:
                 tied = labels >= 0
                 median = group_quantile(labels[tied], albedo[tied], regions, 0.5)
-                deviation = float(np.median(np.abs(np.log(np.maximum(albedo[tied], 1e-12)
-                                                          / np.maximum(median[labels[tied]], 1e-12))).mean(axis=1)))
+                deviation = _deviation(albedo[tied], median[labels[tied]])
                 if deviation <= c.region_max_deviation:
                     albedo[tied] = median[labels[tied]]
                     light_from = "reflection (lobe) and regions"
@@ -742,12 +741,10 @@ class RetinexSegmented(Method):
             joined = BilinearSegmented._assign(labels, albedo, lit, edges, 2.5 * c.segment_threshold)
             labels = np.where(lit & (joined < regions), joined, -1)
         tied = lit & (labels >= 0)
-        own = np.maximum(albedo[tied], 1e-12) / np.maximum(region_albedo[labels[tied]], 1e-12)
         a, b = edges[:, 0], edges[:, 1]
         inside = tied[a] & tied[b] & (labels[a] == labels[b])
-        neighbours = np.maximum(albedo[a[inside]], 1e-12) / np.maximum(albedo[b[inside]], 1e-12)
-        deviation = float(np.median(np.abs(np.log(own)).mean(axis=1))) if tied.any() else np.inf
-        noise = float(np.median(np.abs(np.log(neighbours)).mean(axis=1))) if inside.any() else 0.0
+        deviation = _deviation(albedo[tied], region_albedo[labels[tied]]) if tied.any() else np.inf
+        noise = _deviation(albedo[a[inside]], albedo[b[inside]]) if inside.any() else 0.0
         albedo[tied] = region_albedo[labels[tied]]
         return light, albedo, lit, labels, deviation, deviation / max(noise, 1e-12)
 
@@ -883,9 +880,8 @@ class RetinexSegmented(Method):
             cosine = np.maximum(mesh.face_normals @ found.direction, 0.0)
             share = np.where(cosine > 0, shading * np.pi / np.maximum(cosine, 1e-300), 0.0)   # lit share
             mirror = mirror_directions(mesh.face_normals[obs.face], obs.view_dir)
-            lobe = (c.phong_exponent + 1.0) / (2.0 * np.pi) * np.maximum(mirror @ found.direction, 0.0) ** c.phong_exponent
-            with_sun = lobe_light.fit_lobe_light(obs.face, obs.rgb, np.hstack([rows, (lobe * share[obs.face])[:, None]]),
-                                                 obs.num_faces, loss=self.loss)
+            lobe = phong_lobe(mirror, found.direction[None, :], c.phong_exponent) * share[obs.face, None]   # (N, 1)
+            with_sun = lobe_light.fit_lobe_light(obs.face, obs.rgb, np.hstack([rows, lobe]), obs.num_faces, loss=self.loss)
             if np.all(with_sun.light[-1] > 0):
                 s_light, s_diffuse, s_plain = trial = split(with_sun, np.hstack([plain, shading[:, None]]))
                 base = retinex.edge_residuals(diffuse, plain @ light, edges, usable)
@@ -917,6 +913,11 @@ class RetinexSegmented(Method):
 
 
 LOBE_PREVIEW = 4   # the lobe's gate is first tried on every 4th face
+
+
+def _deviation(albedo: np.ndarray, reference: np.ndarray) -> float:
+    """The median over rows of the mean over channels of |log(albedo / reference)| (both (n, 3))."""
+    return float(np.median(np.abs(np.log(np.maximum(albedo, 1e-12) / np.maximum(reference, 1e-12))).mean(axis=1)))
 
 
 def _same_partition(a: np.ndarray, b: np.ndarray) -> bool:

@@ -70,6 +70,12 @@ def mirror_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSamplin
     return sh.basis(order, mirror) * shadow[:, None]
 
 
+def phong_lobe(mirror: np.ndarray, directions: np.ndarray, exponent: float) -> np.ndarray:
+    """(N, K) the normalised Phong lobe (n + 1)/(2 pi) max(0, r . w)^n of mirror directions
+    (N, 3) at directions (K, 3)."""
+    return (exponent + 1.0) / (2.0 * np.pi) * np.maximum(mirror @ directions.T, 0.0) ** exponent
+
+
 def lobe_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling, visibility: Visibility,
                 order: int, exponent: float, chunk: int = 4096) -> np.ndarray:
     """The specular term with the Phong lobe integrated exactly, cut by the horizon and shadows.
@@ -84,11 +90,10 @@ def lobe_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
     (N, (L + 1)^2) float64.
     """
     y = sh.basis(order, sampling.directions)                                     # (K, M)
-    norm = (exponent + 1.0) / (2.0 * np.pi)
     out = np.empty((len(faces), y.shape[1]))
     for start in range(0, len(faces), chunk):
         stop = min(start + chunk, len(faces))
-        lobe = np.maximum(mirror[start:stop] @ sampling.directions.T, 0.0) ** exponent
+        lobe = phong_lobe(mirror[start:stop], sampling.directions, exponent)
         vis = visibility.unpack(faces[start:stop])
-        out[start:stop] = (lobe * vis * (norm * sampling.weights)) @ y
+        out[start:stop] = (lobe * vis * sampling.weights) @ y
     return out
