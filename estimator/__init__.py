@@ -2,3 +2,5 @@
 
 Math on in-memory arrays only: no file formats, no CLI, no plotting.
 """
+
+from .methods import REGISTRY, estimate  # noqa: E402,F401
