@@ -1,8 +1,8 @@
-# The two commands of the README: `make demo` (main job) and `make test`.
+# The commands of the README: `make demo` (main job), `make test` and `make lint`.
 PY := .venv/bin/python
 OUT ?= out
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test lint bench clean
 
 setup:
 	@bash scripts/setup.sh
@@ -12,6 +12,9 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest
+
+lint: setup
+	.venv/bin/ruff check .
 
 bench: setup
 	$(PY) benchmarks/run_all.py

@@ -19,7 +19,6 @@ from estimator import backend  # noqa: E402
 
 def bare_ray_test(caster, sampling, repeats: int = 5) -> tuple[int, float]:
     """(rays, best seconds) of scene.ray_test alone on the visibility stage's rays (built beforehand)."""
-    mi = caster.mi
     mesh = caster.mesh
     up = mesh.face_normals @ sampling.directions.T > 0
     fi, di = np.nonzero(up)
@@ -46,10 +45,10 @@ def main() -> None:
     p.add_argument("--variant")
     args = p.parse_args()
     backend.set_variant(args.variant)
+    from estimator import estimate
     from estimator.config import EstimatorConfig
-    from estimator.methods import estimate
-    from estimator.raycast import RayCaster
-    from estimator.visibility import compute_visibility, sphere_sampling
+    from estimator.rays.raycast import RayCaster
+    from estimator.rays.visibility import compute_visibility, sphere_sampling
     from harness.io.dataset import read_dataset
     from harness.scene.generate import generate
     from harness.scene.spec import load_spec, resolve_scene

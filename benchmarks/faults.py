@@ -26,16 +26,16 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
+from real_light import score  # noqa: E402
 
-from estimator.methods import estimate  # noqa: E402
-from estimator.pose import reprojection_error  # noqa: E402
-from estimator.validation import cross_validate  # noqa: E402
+from estimator import estimate  # noqa: E402
+from estimator.diagnostics.validation import cross_validate  # noqa: E402
+from estimator.pipeline.pose import reprojection_error  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
 from harness.scene.faults import corrupt_dataset  # noqa: E402
 from harness.scene.generate import generate  # noqa: E402
 from harness.scene.spec import FaultSpec, load_spec, resolve_scene  # noqa: E402
-from real_light import score  # noqa: E402
 from reports.figures import sweep_panels  # noqa: E402
 from reports.html import embed_png  # noqa: E402
 
@@ -121,7 +121,9 @@ def main() -> None:
             t = time.perf_counter()
             est = estimate(ds.data, method, config)
             seconds = time.perf_counter() - t
-            cv = cross_validate(ds.data, args.holdout, lambda d: estimate(d, method, config)) if args.holdout else None
+            cv = None
+            if args.holdout:
+                cv = cross_validate(ds.data, args.holdout, lambda d, m=method, c=config: estimate(d, m, c))
             cameras = [v.camera for v in ds.data.views]
             if rounds:
                 cameras = [dataclasses.replace(c, c2w=np.array(p["c2w"])) for c, p in zip(cameras, est.info["poses"])]

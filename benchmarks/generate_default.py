@@ -34,7 +34,7 @@ def bare_ray_rate(scene: str, profile: str | None, rays: int = 4_000_000) -> flo
     sys.path.insert(0, ROOT)
     import numpy as np
 
-    from estimator.raycast import RayCaster
+    from estimator.rays.raycast import RayCaster
     from harness.scene.generate import build_mesh
     from harness.scene.spec import load_spec, resolve_scene
 

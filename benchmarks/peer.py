@@ -26,7 +26,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
-from estimator.methods import estimate  # noqa: E402
+from estimator import estimate  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
 from harness.scene.generate import generate  # noqa: E402
@@ -78,14 +78,28 @@ def main() -> None:
         final = psnr_of(getattr(peer, component), truth, mask, component)
         at_equal = curve[max([k for k, s in enumerate(seconds) if s <= t_default] or [0])]
         reach = next((s for s, v in zip(seconds, curve) if v >= p_default), None)
-        row = {"case": case, "default": method, "component": component, "default_psnr": p_default, "default_seconds": t_default,
-               "peer_psnr_final": final, "peer_seconds": t_peer, "peer_psnr_at_default_time": at_equal,
-               "peer_seconds_to_default_psnr": reach, "curve_seconds": seconds, "curve_psnr": curve,
-               "peer_steps": peer.info["steps"]}
+        row = {
+            "case": case,
+            "default": method,
+            "component": component,
+            "default_psnr": p_default,
+            "default_seconds": t_default,
+            "peer_psnr_final": final,
+            "peer_seconds": t_peer,
+            "peer_psnr_at_default_time": at_equal,
+            "peer_seconds_to_default_psnr": reach,
+            "curve_seconds": seconds,
+            "curve_psnr": curve,
+            "peer_steps": peer.info["steps"],
+        }
         rows.append(row)
-        print(f"{case:32s} {component} {method} {p_default:6.2f} dB in {t_default:5.1f} s | mitsuba-ad {at_equal:6.2f} dB at "
-              f"equal time, {final:6.2f} dB after {t_peer:5.1f} s ({peer.info['steps']} steps), reaches the default: "
-              f"{'never' if reach is None else f'{reach:.0f} s'}", flush=True)
+        print(
+            f"{case:32s} {component} {method} {p_default:6.2f} dB in {t_default:5.1f} s | "
+            f"mitsuba-ad {at_equal:6.2f} dB at "
+            f"equal time, {final:6.2f} dB after {t_peer:5.1f} s ({peer.info['steps']} steps), reaches the default: "
+            f"{'never' if reach is None else f'{reach:.0f} s'}",
+            flush=True,
+        )
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, f"{args.name}.json"), "w") as f:
         json.dump(rows, f, indent=1)

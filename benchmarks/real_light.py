@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
-from estimator.methods import estimate  # noqa: E402
+from estimator import estimate  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
 from harness.scene.generate import generate  # noqa: E402
@@ -44,7 +44,9 @@ def score(ds, truth, est, component: str = "diffuse") -> dict:
     estimated, true = getattr(est, component), getattr(truth, component)
     lstsq = metrics.albedo_ratios(estimated, true, mask, "lstsq")
     o = est.observed & (est.labels >= 0)
-    ari = metrics.adjusted_rand_index(truth.regions[o], est.labels[o]) if truth.regions is not None and o.any() else None
+    ari = (
+        metrics.adjusted_rand_index(truth.regions[o], est.labels[o]) if truth.regions is not None and o.any() else None
+    )
     return {"psnr": metrics.albedo_psnr(estimated, true, mask),
             "within_10": metrics.ratio_summary(lstsq[:, 3])["within_10"], "ari": ari,
             "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}

@@ -9,7 +9,7 @@ Subdivision s of the icosphere gives 20 x 4^s faces: 5 -> 20,480, 7 -> 327,680,
 8 -> 1,310,720. At 1024² a face of the 1.3M mesh covers about one pixel, so no pixel lies
 inside a single face: the default uses every pixel centre (``pure_pixels`` off; ``--pure-pixels``
 keeps the scene's setting). Above ``dense_rows`` (1.5 M faces + observations) the estimator
-streams its reflection rows (:class:`estimator.pipeline.Prepared`).
+streams its reflection rows (:class:`estimator.pipeline.prepared.Prepared`).
 
 Prints per size: faces, observations, generation and estimation seconds (per stage), the
 peak RSS of each, and the share of faces whose specular albedo is within ±10 % of the truth
@@ -44,7 +44,7 @@ import numpy as np
 sys.path.insert(0, {root!r})
 from harness.io.dataset import read_dataset
 from harness.io.runs import estimator_settings
-from estimator.methods import estimate
+from estimator import estimate
 ds = read_dataset({folder!r}, load_test=False, load_truth=False)
 method, config = estimator_settings(ds.meta)
 if not {pure!r}:
@@ -99,9 +99,11 @@ def main() -> None:
               f"{' (streamed)' if row['streamed'] else ''}; {100 * row['within_10']:.1f} % within ±10 %", flush=True)
     for row in rows:
         t = row["timings"]
-        print(f"{row['faces']:9d} faces: shadow function {1e9 * t['visibility'] / (row['faces'] * row['directions']):.1f}"
-              f" ns per face x direction; observations {1e9 * t['observations'] / (row['views'] * row['pixels']):.0f}"
-              f" ns per view x pixel; solve {1e6 * t['solve'] / row['observations']:.1f} us per observation")
+        print(
+            f"{row['faces']:9d} faces: shadow function {1e9 * t['visibility'] / (row['faces'] * row['directions']):.1f}"
+            f" ns per face x direction; observations {1e9 * t['observations'] / (row['views'] * row['pixels']):.0f}"
+            f" ns per view x pixel; solve {1e6 * t['solve'] / row['observations']:.1f} us per observation"
+        )
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "scale.json"), "w") as f:
         json.dump(rows, f, indent=1)

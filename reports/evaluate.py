@@ -5,10 +5,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.data import Estimate, TriangleMesh
+from estimator import Estimate, TriangleMesh
 
 from . import metrics
-from .ground_truth import GroundTruth, evaluation_mask, filtered_illumination, true_irradiance
+from .ground_truth import (
+    GroundTruth,
+    evaluation_mask,
+    filtered_illumination,
+    true_irradiance,
+)
 
 SCHEMA = "pseudolight-metrics"
 SCHEMA_VERSION = 1

@@ -9,9 +9,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from estimator import latlong, sh  # noqa: E402
-from estimator.camera import Camera  # noqa: E402
-from estimator.raycast import RayCaster  # noqa: E402
+from estimator import (  # noqa: E402
+    Camera,  # noqa: E402
+    RayCaster,  # noqa: E402
+    latlong,
+    sh,
+)
 
 from .metrics import LUMINANCE, lstsq_scale, tonemap  # noqa: E402
 
@@ -41,7 +44,9 @@ def illumination(estimate_sh: np.ndarray, truth_sh: np.ndarray, size=(128, 256))
     order = sh.order_of(estimate_sh.shape[0])
     band = sh.degrees(order)
     for coeffs, label in ((truth_sh, "truth"), (estimate_sh, "estimate")):
-        axes[2].semilogy(range(order + 1), [np.sum(coeffs[band == l] ** 2) for l in range(order + 1)], "o-", label=label)
+        axes[2].semilogy(
+            range(order + 1), [np.sum(coeffs[band == l] ** 2) for l in range(order + 1)], "o-", label=label
+        )
     axes[2].set_xlabel("SH band l")
     axes[2].set_title("energy per band", fontsize=9)
     axes[2].legend(fontsize=8)

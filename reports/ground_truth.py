@@ -6,12 +6,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator import sh
-from estimator.config import EstimatorConfig
-from estimator.data import TriangleMesh
-from estimator.raycast import RayCaster
-from estimator.reflection import diffuse_matrix
-from estimator.visibility import SphereSampling, Visibility, compute_visibility, sphere_sampling
+from estimator import (
+    EstimatorConfig,
+    RayCaster,
+    SphereSampling,
+    TriangleMesh,
+    Visibility,
+    compute_visibility,
+    diffuse_matrix,
+    sh,
+    sphere_sampling,
+)
 
 from .metrics import LUMINANCE
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import comb
 
-from estimator import sh
+from estimator import psnr_db, sh
 
 
 def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
@@ -80,7 +80,7 @@ def albedo_psnr(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> fl
     if e.size == 0:
         return None
     mse = float(np.mean((e * lstsq_scale(e, t)[None] - t) ** 2))
-    return 100.0 if mse <= 1e-10 else float(10 * np.log10(1.0 / mse))
+    return psnr_db(mse, 1.0)
 
 
 def ratio_summary(ratios: np.ndarray) -> dict:
@@ -131,9 +131,8 @@ def align_scale(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray)
 
 
 def psnr(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
-    """PSNR (dB) over the masked pixels with the given peak; capped at 100 dB for identical images."""
-    mse = float(np.mean((prediction[mask] - reference[mask]) ** 2))
-    return 100.0 if mse <= peak * peak * 1e-10 else float(10 * np.log10(peak * peak / mse))
+    """PSNR (dB) over the masked pixels with the given peak (:func:`estimator.psnr_db`)."""
+    return psnr_db(float(np.mean((prediction[mask] - reference[mask]) ** 2)), peak)
 
 
 def ssim(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
@@ -152,7 +151,8 @@ def image_metrics(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarra
     """PSNR, SSIM and relative L2 of a predicted linear image against a reference, on the object's pixels.
 
     With ``align`` the prediction is first scaled per channel by least squares
-    over the mask (the estimate's albedo/light scale is a gauge). 'linear': HDR values, peak = max of the reference. 'srgb':
+    over the mask (the estimate's albedo/light scale is a gauge). 'linear': HDR values, peak =
+    max of the reference. 'srgb':
     both tone mapped with exposure = 99th percentile of the reference's
     masked values, peak 1.
     """

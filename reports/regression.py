@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from estimator.errors import InputError
+from estimator import InputError
 
 from .html import lookup
 
@@ -52,8 +52,10 @@ def validate_baseline(baseline, source: str = "baseline") -> dict:
         if not isinstance(entry, dict) or entry.get("better") not in ("higher", "lower") \
                 or isinstance(entry.get("tolerance"), bool) or not isinstance(entry.get("tolerance"), (int, float)) \
                 or not math.isfinite(entry["tolerance"]) or entry["tolerance"] < 0:
-            raise InputError(f"{source}: tolerances.{path} must be {{better: 'higher'|'lower', tolerance: number >= 0}}, "
-                             f"got {entry!r}")
+            raise InputError(
+                f"{source}: tolerances.{path} must be {{better: 'higher'|'lower', tolerance: number >= 0}}, "
+                f"got {entry!r}"
+            )
     return baseline
 
 

@@ -12,9 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.data import Estimate, View
-from estimator.forward import Predictor
-from estimator.sh import axis_angle_matrix
+from estimator import Estimate, Predictor, View, axis_angle_matrix
 
 from . import figures
 from .evaluate import ImageSet, evaluate

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.forward import Predictor
+from estimator import Predictor
 
 from . import figures
 
@@ -34,7 +34,7 @@ def self_check(predictor: Predictor, views: list, run: dict, est, max_views: int
 
     Parameters
     ----------
-    views : the training views (``estimator.data.View``) the run was solved from.
+    views : the training views (``estimator.core.data.View``) the run was solved from.
     run : the run's run.json (``trust``, ``warnings``, ``degrees_of_freedom``, optionally
         ``cross_validation``).
     est : the Estimate (``face_stats`` gives the per-face standard errors).

@@ -9,7 +9,7 @@ import os
 
 import numpy as np
 
-from estimator.errors import InputError
+from estimator import InputError
 
 from . import figures
 from .html import embed_png
@@ -112,10 +112,15 @@ def write(folder: str, name: str, rows: list[dict], verdict: list[dict] | None =
         parts.append(f"<h2>Regression against the baseline sweep: {len(verdict) - len(worse)} of {len(verdict)} "
                      "tracked metrics within tolerance</h2>")
         if worse:
-            parts.append("<table border='1'><tr><th>row</th><th>metric</th><th>baseline</th><th>now</th></tr>" + "".join(
-                f"<tr><td>{html.escape(v['row'])}</td><td>{html.escape(v['metric'])}</td><td>{v['baseline']:.4g}</td>"
-                f"<td>{'missing' if v['current'] is None else format(v['current'], '.4g')}</td></tr>" for v in worse)
-                + "</table>")
+            parts.append(
+                "<table border='1'><tr><th>row</th><th>metric</th><th>baseline</th><th>now</th></tr>"
+                + "".join(
+                    f"<tr><td>{html.escape(v['row'])}</td><td>{html.escape(v['metric'])}</td><td>{v['baseline']:.4g}</td>"
+                    f"<td>{'missing' if v['current'] is None else format(v['current'], '.4g')}</td></tr>"
+                    for v in worse
+                )
+                + "</table>"
+            )
     for scene in dict.fromkeys(r["scene"] for r in rows):
         axes = list(dict.fromkeys(a for r in rows if r["scene"] == scene for a in r["axes"]))
         for axis in axes:

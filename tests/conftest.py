@@ -5,7 +5,7 @@ import os
 
 import pytest
 
-from estimator import backend
+from estimator.rays import backend
 
 backend.set_variant()  # picks llvm_ad_rgb here (points DRJIT_LIBLLVM_PATH at libLLVM >= 16)
 

@@ -1,6 +1,6 @@
 """The ``pseudolight`` command line.
 
-Bad input (any :class:`estimator.errors.InputError`) ends with one line naming the
+Bad input (any :class:`estimator.core.errors.InputError`) ends with one line naming the
 file, key or flag and exit code 2; an interrupt (Ctrl-C, SIGTERM) with 130 or
 143 and no partial output; anything else is a bug and keeps its traceback (exit 1).
 """
@@ -17,9 +17,7 @@ import time
 
 import numpy as np
 
-from estimator.backend import VARIANTS
-from estimator.errors import InputError
-
+from estimator import VARIANTS, InputError
 from harness.io.atomic import OutputError, check_output, refuse_inputs
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
@@ -226,7 +224,6 @@ def cmd_suite(args) -> int:
     from harness.cli.reporting import print_table
     from harness.sweep.runner import run_sweep
     from harness.sweep.suite import load_suite
-
     from reports.sweep import read_rows
 
     if args.scheduler and args.executor != "dask":
@@ -283,8 +280,7 @@ def _positive_float(flag: str, text: str) -> float:
 
 
 def cmd_estimate(args) -> int:
-    from estimator.methods import EXPONENT_CANDIDATES, estimate, get_method
-
+    from estimator import EXPONENT_CANDIDATES, estimate, get_method
     from harness.io.dataset import fingerprint, read_dataset, read_ground_truth
     from harness.io.runs import estimator_settings, write_run
 
@@ -313,12 +309,12 @@ def cmd_estimate(args) -> int:
                              "(pass --truth DATASET)")
         known = truth.known_light()
     if args.holdout_views:
-        from estimator.validation import holdout_indices
+        from estimator import holdout_indices
         holdout_indices(len(ds.data.views), args.holdout_views)   # refuse a bad count before solving
     say = lambda m: _err(f"  {m}")  # noqa: E731
     est = estimate(ds.data, method, config, **known, log=say, exponent_candidates=candidates)
     if args.holdout_views:
-        from estimator.validation import cross_validate
+        from estimator import cross_validate
         try:
             cv = cross_validate(ds.data, args.holdout_views,
                                 lambda data: estimate(data, method, config, **known, exponent_candidates=candidates))
@@ -370,9 +366,7 @@ def _print_trust(est) -> None:
 
 
 def cmd_render(args) -> int:
-    from estimator.forward import Predictor
-    from estimator.sh import axis_angle_matrix
-
+    from estimator import Predictor, axis_angle_matrix
     from harness.cli.reporting import open_run
     from harness.io.atomic import atomic_directory
     from harness.io.exr import write_exr
@@ -426,7 +420,9 @@ def cmd_export(args) -> int:
               f"{summary['light']} light, {summary['integrator']} integrator, {summary['spp']} spp) written to "
               f"{os.path.abspath(args.output)}")
         return 0
-    with atomic_directory(args.output, overwrite=args.overwrite, inputs=[args.dataset, *ds.inputs], kind="export") as tmp:
+    with atomic_directory(
+        args.output, overwrite=args.overwrite, inputs=[args.dataset, *ds.inputs], kind="export"
+    ) as tmp:
         summary = write_nerf_synthetic(ds, tmp, args.size)
     print(f"nerf-synthetic: {summary['train']} train + {summary['test']} test frames (exposure "
           f"{summary['exposure']:.4g}){', ground truth textures' if 'ground_truth' in summary else ''} written to "
@@ -436,7 +432,12 @@ def cmd_export(args) -> int:
 
 def cmd_import(args) -> int:
     from harness.io.dataset import fingerprint, read_dataset
-    from harness.io.imports import imported_estimate, read_mitsuba_xml, read_per_face, read_uv_textures
+    from harness.io.imports import (
+        imported_estimate,
+        read_mitsuba_xml,
+        read_per_face,
+        read_uv_textures,
+    )
     from harness.io.runs import write_run
 
     files = [p for p in (args.file, args.mesh, args.diffuse, args.specular, args.envmap) if p]
@@ -481,8 +482,13 @@ _positive_int, _count = _int_at_least(1), _int_at_least(0)
 
 
 def _add_estimator_flags(p) -> None:
-    from estimator.config import COMPONENTS, DIFFUSE_LIGHTS, LOSSES, SPECULAR_MODELS
-    from estimator.methods import DEFAULT_METHOD
+    from estimator import (
+        COMPONENTS,
+        DEFAULT_METHOD,
+        DIFFUSE_LIGHTS,
+        LOSSES,
+        SPECULAR_MODELS,
+    )
 
     p.add_argument("--method", help="registered method (default: the dataset's recommendation, "
                                     f"else {DEFAULT_METHOD})")
@@ -614,11 +620,15 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--format", choices=("nerf-synthetic", "mitsuba"), default="nerf-synthetic")
     ex.add_argument("-o", "--output", required=True, help="folder to create")
     ex.add_argument("--size", type=_int_at_least(16), default=1024, help="ground-truth texture size (nerf-synthetic)")
-    ex.add_argument("--spp", type=_positive_int, help="samples per pixel of the Mitsuba scenes (default: the dataset's)")
+    ex.add_argument(
+        "--spp", type=_positive_int, help="samples per pixel of the Mitsuba scenes (default: the dataset's)"
+    )
     ex.add_argument("--overwrite", action="store_true")
     ex.set_defaults(func=cmd_export)
 
-    im = sub.add_parser("import", help="another method's result (per-face arrays, UV textures or a Mitsuba scene XML) as a run")
+    im = sub.add_parser(
+        "import", help="another method's result (per-face arrays, UV textures or a Mitsuba scene XML) as a run"
+    )
     im.add_argument("dataset")
     im.add_argument("--from", dest="source", choices=("per-face", "uv-textures", "mitsuba-xml"), required=True)
     im.add_argument("--file", help="per-face .npz (diffuse, specular, radiance_sh|pseudo_sh) or .csv; or a Mitsuba "

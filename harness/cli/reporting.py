@@ -9,21 +9,24 @@ import time
 
 import numpy as np
 
-from estimator.errors import InputError
-from estimator.forward import Predictor
-from estimator.models import NoMitsubaEquivalent
-from estimator.sh import axis_angle_matrix
-from reports.html import compare_page, report_page
-from reports.regression import check
-from reports.selfcheck import self_check
-from reports.report import COMPARE_COLUMNS, Renders, assemble, compare_figures, compare_row, text_table
-
+from estimator import InputError, NoMitsubaEquivalent, Predictor, axis_angle_matrix
 from harness.io.atomic import atomic_directory, check_output
 from harness.io.dataset import fingerprint, read_dataset
 from harness.io.jsonio import dump_json, load_json
 from harness.io.runs import RunError, read_run, versions
 from harness.scene.export import export_scene, render_estimate
 from harness.scene.relight import render_truth
+from reports.html import compare_page, report_page
+from reports.regression import check
+from reports.report import (
+    COMPARE_COLUMNS,
+    Renders,
+    assemble,
+    compare_figures,
+    compare_row,
+    text_table,
+)
+from reports.selfcheck import self_check
 
 
 def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: bool, load_test: bool = True,

@@ -5,10 +5,7 @@ from __future__ import annotations
 
 import os
 
-from estimator.data import Estimate
-from estimator.errors import InputError
-from estimator.methods import REGISTRY, estimate
-
+from estimator import REGISTRY, Estimate, InputError, estimate
 from harness.cli.reporting import build_report
 from harness.io.dataset import fingerprint, read_dataset, read_ground_truth
 from harness.io.runs import estimator_settings, write_run

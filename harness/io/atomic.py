@@ -21,7 +21,7 @@ import shutil
 import tempfile
 import time
 
-from estimator.errors import InputError
+from estimator import InputError
 
 MARKER = ".pseudolight-output"
 _PARTIAL = re.compile(r"^\..+\.pseudolight-(?:partial|old)-(\d{1,9})-")

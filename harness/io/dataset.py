@@ -13,15 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image
 
-from estimator.camera import Camera
-from estimator.errors import InputError
-from estimator.data import MultiViewData, TriangleMesh, View
-from reports.ground_truth import GroundTruth
-from reports.metrics import srgb_decode
-
+from estimator import Camera, InputError, MultiViewData, TriangleMesh, View
 from harness.io.exr import read_exr, write_exr
 from harness.io.jsonio import load_json
 from harness.io.mesh import load_mesh_file, save_mesh_ply
+from reports.ground_truth import GroundTruth
+from reports.metrics import srgb_decode
 
 FORMAT_NAME = "pseudolight-dataset"
 FORMAT_VERSION = 2  # 2: ground_truth/illumination_sh.npz names its array radiance_sh (1: sh)
@@ -68,7 +65,14 @@ def write_dataset(folder: str, mesh: TriangleMesh, views: list[tuple[Camera, np.
     cams = [c for c, _ in views + test_views]
     first = cams[0]
     for c in cams:
-        if (c.width, c.height, c.fx, c.fy, c.cx, c.cy) != (first.width, first.height, first.fx, first.fy, first.cx, first.cy):
+        if (c.width, c.height, c.fx, c.fy, c.cx, c.cy) != (
+            first.width,
+            first.height,
+            first.fx,
+            first.fy,
+            first.cx,
+            first.cy,
+        ):
             raise ValueError("write_dataset: all cameras must share intrinsics")
     os.makedirs(os.path.join(folder, "images"), exist_ok=True)
     frames, test_frames = [], []
@@ -253,7 +257,12 @@ def read_ground_truth(folder: str, num_faces: int) -> GroundTruth | None:
         if not isinstance(info.get(name), dict):
             raise DatasetError(f"{gt}/illumination.json: key '{name}' missing or not an object")
     exponent = info["brdf"].get("exponent")
-    if isinstance(exponent, bool) or not isinstance(exponent, (int, float)) or not np.isfinite(exponent) or exponent <= 0:
+    if (
+        isinstance(exponent, bool)
+        or not isinstance(exponent, (int, float))
+        or not np.isfinite(exponent)
+        or exponent <= 0
+    ):
         raise DatasetError(f"{gt}/illumination.json: brdf.exponent must be a positive number, got {exponent!r}")
     regions = mats.get("regions")
     if regions is not None and (regions.shape != (num_faces,) or not np.issubdtype(regions.dtype, np.integer)

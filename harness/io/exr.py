@@ -6,7 +6,7 @@ import os
 import numpy as np
 import OpenEXR
 
-from estimator.errors import InputError
+from estimator import InputError
 
 
 def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) -> None:

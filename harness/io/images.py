@@ -5,9 +5,7 @@ import os
 
 import numpy as np
 
-from estimator import backend
-from estimator.errors import InputError
-
+from estimator import InputError, backend
 from harness.io.exr import read_exr
 
 

@@ -18,11 +18,7 @@ import zipfile
 
 import numpy as np
 
-from estimator import sh
-from estimator.config import EstimatorConfig
-from estimator.data import Estimate, TriangleMesh
-from estimator.errors import InputError
-
+from estimator import Estimate, EstimatorConfig, InputError, TriangleMesh, sh
 from harness.io.images import read_linear_rgb
 from harness.io.mesh import load_mesh_with_uv
 
@@ -49,7 +45,7 @@ def _per_face_array(where: str, value, num_faces: int) -> np.ndarray:
     return array
 
 
-def read_per_face(path: str, num_faces: int) -> dict:
+def read_per_face(path: str, num_faces: int) -> dict:  # noqa: C901  (one check per key of the format)
     """Per-face arrays of another method.
 
     ``.npz``: ``diffuse`` (F, 3); optional ``specular`` (F, 3), ``radiance_sh`` or
@@ -74,8 +70,13 @@ def read_per_face(path: str, num_faces: int) -> dict:
         for key in ("radiance_sh", "pseudo_sh"):
             if key in data:
                 coeffs = _floats(f"{path}: {key}", data[key])
-                if coeffs.ndim != 2 or len(coeffs) == 0 or coeffs.shape[1] != 3 or int(np.sqrt(len(coeffs))) ** 2 != len(coeffs) \
-                        or not np.all(np.isfinite(coeffs)):
+                if (
+                    coeffs.ndim != 2
+                    or len(coeffs) == 0
+                    or coeffs.shape[1] != 3
+                    or int(np.sqrt(len(coeffs))) ** 2 != len(coeffs)
+                    or not np.all(np.isfinite(coeffs))
+                ):
                     raise InputError(f"{path}: {key} must be finite ((L+1)^2, 3), got {coeffs.shape}")
                 out[key] = coeffs
         return out
@@ -160,7 +161,7 @@ DIFFUSE_PROPERTY = {"diffuse": "reflectance", "plastic": "diffuse_reflectance",
 MIRRORS = ("conductor", "roughconductor")
 
 
-def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:
+def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  # noqa: C901  (one check per element)
     """Per-face albedos and the radiance SH of a Mitsuba 3 scene XML, for the dataset's ``mesh``.
 
     The scene's first ``ply``/``obj`` shape with a BSDF is read (its ``to_world`` matrix
@@ -170,7 +171,8 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:
     albedo and second w x its albedo (a ``conductor``/``roughconductor`` child is the
     specular albedo: its ``specular_reflectance``). Albedos are ``bitmap`` textures (relative
     paths from the XML's folder; 8-bit files are sRGB unless ``raw``; a PLY's v runs top-down
-    as Mitsuba reads it, an OBJ's bottom-up) or constant ``rgb`` / ``float`` values. The light is the first ``envmap`` emitter (``scale`` and the rotation
+    as Mitsuba reads it, an OBJ's bottom-up) or constant ``rgb`` / ``float`` values. The light is
+    the first ``envmap`` emitter (``scale`` and the rotation
     of ``to_world`` applied) or ``constant`` emitter.
     """
     import xml.etree.ElementTree as ET
@@ -219,9 +221,14 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:
             if child.tag == "texture" and child.get("type") == "bitmap":
                 raw = child.find("boolean[@name='raw']")
                 nearest = child.find("string[@name='filter_type']")
-                return _texture_faces(mesh, textured, uv, os.path.join(folder, _xml_value(child, "string", "filename", path)),
-                                      raw is not None and raw.get("value") == "true",
-                                      nearest is not None and nearest.get("value") == "nearest")
+                return _texture_faces(
+                    mesh,
+                    textured,
+                    uv,
+                    os.path.join(folder, _xml_value(child, "string", "filename", path)),
+                    raw is not None and raw.get("value") == "true",
+                    nearest is not None and nearest.get("value") == "nearest",
+                )
             if child.tag in ("rgb", "float"):
                 return np.tile(_xml_floats(child, path, 3), (mesh.num_faces, 1))
             raise InputError(f"{path}: {element.get('type')}.{name} is a <{child.tag} type={child.get('type')!r}>; "

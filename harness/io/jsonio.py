@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from estimator.errors import InputError
+from estimator import InputError
 
 
 def strict(value, where: str = "", reasons: dict | None = None):

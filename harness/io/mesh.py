@@ -6,8 +6,7 @@ import os
 import numpy as np
 import trimesh
 
-from estimator.data import TriangleMesh
-from estimator.errors import InputError
+from estimator import InputError, TriangleMesh
 
 
 def load_mesh_file(path: str | os.PathLike) -> TriangleMesh:

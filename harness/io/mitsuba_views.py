@@ -12,7 +12,7 @@ Only Mitsuba's own plugins appear: ``diffuse``, ``plastic`` or ``roughplastic`` 
 ``bitmap`` texture; ``envmap``, ``directional``, ``point`` or ``sunsky``; ``path`` (or
 ``direct`` for delta lights, which samples one light per sample where the generator loops
 over them: the same expectation, more noise); the generator's ``perspective`` sensor with an
-RGBA ``hdrfilm`` (:func:`estimator.camera.mitsuba_sensor`).
+RGBA ``hdrfilm`` (:func:`estimator.core.camera.mitsuba_sensor`).
 Datasets rendered with pseudolight's Phong BSDF have no stock equivalent and are refused.
 """
 from __future__ import annotations
@@ -22,9 +22,7 @@ import shutil
 
 import numpy as np
 
-from estimator.camera import mitsuba_sensor
-from estimator.errors import InputError
-
+from estimator import InputError, mitsuba_sensor
 from harness.io.dataset import Dataset
 from harness.io.exr import write_exr
 from harness.io.jsonio import load_json
@@ -59,8 +57,10 @@ def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> di
                          "and light); this dataset has none")
     model = truth.brdf.get("model")
     if model not in STOCK_MATERIALS:
-        raise InputError(f"the dataset's material is {model!r}: stock Mitsuba 3 has no such BSDF (pseudolight's "
-                         f"Phong is a plugin); --format mitsuba exports datasets made with {', '.join(STOCK_MATERIALS)}")
+        raise InputError(
+            f"the dataset's material is {model!r}: stock Mitsuba 3 has no such BSDF (pseudolight's "
+            f"Phong is a plugin); --format mitsuba exports datasets made with {', '.join(STOCK_MATERIALS)}"
+        )
     record = load_json(os.path.join(ds.path, "ground_truth", "illumination.json"), "the ground-truth light")
     render = record.get("scene_spec", {}).get("render", {})
     emitters = _emitters(record["illumination"])
@@ -86,7 +86,9 @@ def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> di
         for k, view in enumerate(views):
             scene = {"type": "scene", "integrator": integrator, "object": shape, **emitters,
                      "sensor": mitsuba_sensor(NUMPY_TRANSFORMS, view.camera, samples)}
-            comment = f"pseudolight dataset {os.path.basename(os.path.abspath(ds.path))}, {split} frame {k} ({view.name})"
+            comment = (
+                f"pseudolight dataset {os.path.basename(os.path.abspath(ds.path))}, {split} frame {k} ({view.name})"
+            )
             with open(os.path.join(out_dir, f"{split}_{k:03d}.xml"), "w") as f:
                 f.write(scene_xml(scene, comment))
         counts[split] = len(views)

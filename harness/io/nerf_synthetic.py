@@ -20,10 +20,7 @@ import os
 import numpy as np
 from PIL import Image
 
-from estimator.camera import Camera
-from estimator.config import EstimatorConfig
-from estimator.data import Estimate, View
-
+from estimator import Camera, Estimate, EstimatorConfig, View
 from harness.io.dataset import Dataset, view_rgba
 from harness.io.exr import write_exr
 from harness.io.texture import export_textures, srgb8

@@ -8,12 +8,7 @@ from importlib import metadata
 
 import numpy as np
 
-from estimator import sh
-from estimator.config import EstimatorConfig
-from estimator.data import Estimate
-from estimator.errors import InputError
-from estimator.methods import DEFAULT_METHOD
-
+from estimator import DEFAULT_METHOD, Estimate, EstimatorConfig, InputError, sh
 from harness.io.atomic import atomic_directory
 from harness.io.exr import write_exr
 from harness.io.jsonio import dump_json, load_json
@@ -109,15 +104,17 @@ def _face_stats(npz: str, data: dict, f: int) -> dict:
             want is None or got == want for want, got in zip(tail, a.shape[1:]))
         kind_ok = np.issubdtype(a.dtype, np.integer) if integer else np.issubdtype(a.dtype, np.floating)
         if not (shape_ok and kind_ok):
-            raise RunError(f"{npz}: {key} must be {'integer' if integer else 'float'} of shape "
-                           f"({f}{''.join(', ' + ('K' if t is None else str(t)) for t in tail)}), got {a.dtype} {a.shape}")
+            raise RunError(
+                f"{npz}: {key} must be {'integer' if integer else 'float'} of shape "
+                f"({f}{''.join(', ' + ('K' if t is None else str(t)) for t in tail)}), got {a.dtype} {a.shape}"
+            )
         if not integer and (np.isnan(a).any() or (not inf_ok and not np.all(np.isfinite(a)))):
             raise RunError(f"{npz}: {key} contains NaN{'' if inf_ok else ' or Inf'}")
         out[name] = a
     return out
 
 
-def read_run(folder: str) -> tuple[Estimate, dict]:
+def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check per key of the format)
     """(Estimate, run.json dict) of a run folder; anything missing, malformed or
     non-finite raises :class:`RunError` naming the file and key."""
     folder = os.path.abspath(folder)
@@ -130,7 +127,9 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
     run = load_json(js, "run", RunError)
     version = run.get("format_version", 1)
     if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= RUN_FORMAT_VERSION:
-        raise RunError(f"{js}: format_version {version!r} is not one this pseudolight reads (1 to {RUN_FORMAT_VERSION})")
+        raise RunError(
+            f"{js}: format_version {version!r} is not one this pseudolight reads (1 to {RUN_FORMAT_VERSION})"
+        )
     for key, kind in (("method", str), ("parameters", dict), ("dataset", str)):
         if not isinstance(run.get(key), kind) or (kind is str and not run[key]):
             raise RunError(f"{js}: '{key}' missing or not a {kind.__name__}")
@@ -173,9 +172,18 @@ def read_run(folder: str) -> tuple[Estimate, dict]:
     if data[pseudo_key].shape[0] != (config.sh_order + 1) ** 2:
         raise RunError(f"{npz}: {pseudo_key} has {data[pseudo_key].shape[0]} coefficients, run.json's sh_order "
                        f"{config.sh_order} needs {(config.sh_order + 1) ** 2}")
-    est = Estimate(data["diffuse"], data["specular"], data[pseudo_key], data["labels"], data["observed"].astype(bool),
-                   run["method"], config, {k: run[k] for k in ("timings", "trust", "warnings", "ad_history") if k in run},
-                   data.get("radiance_sh"), _face_stats(npz, data, f))
+    est = Estimate(
+        data["diffuse"],
+        data["specular"],
+        data[pseudo_key],
+        data["labels"],
+        data["observed"].astype(bool),
+        run["method"],
+        config,
+        {k: run[k] for k in ("timings", "trust", "warnings", "ad_history") if k in run},
+        data.get("radiance_sh"),
+        _face_stats(npz, data, f),
+    )
     if est.model.light == "radiance" and est.radiance_sh is None:
         raise RunError(f"{npz}: key 'radiance_sh' missing (the {est.model.name!r} model solves for the radiance)")
     return est, run

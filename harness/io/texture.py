@@ -14,12 +14,9 @@ import os
 import numpy as np
 from scipy import ndimage
 
-from estimator import sh
-from estimator.data import Estimate, TriangleMesh
-from reports.metrics import srgb_encode
-from estimator.errors import InputError
-
+from estimator import Estimate, InputError, TriangleMesh, sh
 from harness.io.exr import write_exr
+from reports.metrics import srgb_encode
 
 
 def uv_atlas(mesh: TriangleMesh, uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

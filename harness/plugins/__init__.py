@@ -5,7 +5,7 @@ Each plugin is a module-level class on the active variant's ``mi.BSDF`` or
 ``mi.SamplingIntegrator``, configured from its properties and validated in
 ``__init__``, as Mitsuba's own Python plugins are. Mitsuba's classes depend on
 the variant, so the plugin modules are imported only by :func:`register_all`,
-after the variant is chosen (:mod:`estimator.backend`).
+after the variant is chosen (:mod:`estimator.rays.backend`).
 """
 from __future__ import annotations
 

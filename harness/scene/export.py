@@ -1,6 +1,6 @@
 """An estimate as a Mitsuba scene: the physically based cross-check of the model.
 
-The estimate's reflection model (:mod:`estimator.models`) names the Mitsuba
+The estimate's reflection model (:mod:`estimator.model.reflection_models`) names the Mitsuba
 BSDF that renders it: for the paper's model, the diffuse + perfect-mirror BSDF
 lit by the pseudo illumination h; for the lobe model, the Phong BSDF lit by the
 radiance L. The mesh carries the per-face albedos, the environment map is the
@@ -13,11 +13,14 @@ import os
 
 import numpy as np
 
-from estimator import sh
-from estimator.camera import Camera, mitsuba_sensor
-from estimator.data import Estimate, TriangleMesh
-from estimator.models import MitsubaMaterial
-
+from estimator import (
+    Camera,
+    Estimate,
+    MitsubaMaterial,
+    TriangleMesh,
+    mitsuba_sensor,
+    sh,
+)
 from harness import plugins
 from harness.io.exr import write_exr
 from harness.io.mesh import write_uv_ply
@@ -48,7 +51,7 @@ def render_estimate(mesh: TriangleMesh, est: Estimate, cameras: list[Camera], sp
     non-negative radiance, so the positive and negative parts of the SH
     environment are rendered separately and subtracted: the result is the
     render of the signed environment, as the forward model sees it.
-    Raises :class:`estimator.models.NoMitsubaEquivalent` for a model without one.
+    Raises :class:`estimator.model.reflection_models.NoMitsubaEquivalent` for a model without one.
     """
     exponent = _exponent(est.model.mitsuba_material())
     signed = environment(est)

@@ -13,11 +13,9 @@ import os
 
 import numpy as np
 
-from estimator.camera import Camera
-from estimator.data import TriangleMesh
-from reports.metrics import srgb_encode
-
+from estimator import Camera, TriangleMesh
 from harness.scene.spec import FaultSpec
+from reports.metrics import srgb_encode
 
 
 def exposure_level(image: np.ndarray) -> float:

@@ -8,36 +8,28 @@ import time
 
 import numpy as np
 
-from estimator import backend
-from estimator.camera import Camera
-from estimator.data import TriangleMesh
-from estimator.raycast import RayCaster
-from reports.ground_truth import GroundTruth
-
+from estimator import Camera, RayCaster, TriangleMesh, backend
 from harness.io.atomic import atomic_directory
 from harness.io.dataset import write_dataset, write_ground_truth
 from harness.io.images import read_linear_rgb
-from harness.io.mesh import load_mesh_with_uv
 from harness.scene import geometry
 from harness.scene.faults import apply_faults
 from harness.scene.illumination import Illumination, build_illumination
 from harness.scene.render import build_scene, make_cameras, render_views
 from harness.scene.spec import AlbedoSpec, SceneSpec, SpecError
-from harness.scene.textures import region_labels, spherical_texture_average, uv_texture_average
+from harness.scene.textures import (
+    region_labels,
+    spherical_texture_average,
+    uv_texture_average,
+)
+from reports.ground_truth import GroundTruth
 
 GROUND_TRUTH_SH_ORDER = 12
 
 
 def build_mesh(spec: SceneSpec) -> tuple[TriangleMesh, np.ndarray | None]:
     """The spec's mesh and its per-vertex texture coordinates (None unless a mesh file has them)."""
-    g = spec.geometry
-    if g.type == "icosphere":
-        return geometry.icosphere(g.subdivisions, g.radius), None
-    if g.type == "blob":
-        return geometry.blob(g.subdivisions, g.radius, g.lobes, g.depth), None
-    if g.type == "bumpy":
-        return geometry.bumpy(g.subdivisions, g.radius, g.lobes, g.depth, g.bumps, g.frequency, spec.seed), None
-    return load_mesh_with_uv(g.file)
+    return geometry.build_geometry(spec.geometry, spec.seed)
 
 
 def _albedo(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where: str) -> np.ndarray:

@@ -1,10 +1,35 @@
-"""Procedural geometry -> TriangleMesh (mesh files: :mod:`harness.io.mesh`)."""
+"""Geometry kinds -> TriangleMesh: procedural bodies and mesh files.
+
+Each kind of ``[geometry] type`` is one function registered with :func:`geometry_kind`:
+it takes the validated geometry spec and the scene's seed and returns the mesh and its
+per-vertex texture coordinates (None when it has none). A new kind is one such function
+here (its spec keys in :class:`harness.scene.spec.GeometrySpec`).
+"""
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 import trimesh
 
-from estimator.data import TriangleMesh
+from estimator import TriangleMesh
+from harness.io.mesh import load_mesh_with_uv
+
+Builder = Callable[..., "tuple[TriangleMesh, np.ndarray | None]"]
+GEOMETRY_KINDS: dict[str, Builder] = {}
+
+
+def geometry_kind(name: str) -> Callable[[Builder], Builder]:
+    """Decorator: register a builder ``(spec, seed) -> (mesh, uv or None)`` as ``type = name``."""
+    def register(builder: Builder) -> Builder:
+        GEOMETRY_KINDS[name] = builder
+        return builder
+    return register
+
+
+def build_geometry(spec, seed: int) -> tuple[TriangleMesh, np.ndarray | None]:
+    """The mesh of a validated geometry spec (``spec.type`` a registered kind)."""
+    return GEOMETRY_KINDS[spec.type](spec, seed)
 
 
 def icosphere(subdivisions: int, radius: float = 1.0) -> TriangleMesh:
@@ -51,3 +76,23 @@ def bumpy(subdivisions: int, radius: float = 1.0, lobes: int = 4, depth: float =
     field = sh.basis(frequency, d) @ coeffs
     field /= max(float(np.sqrt(np.mean(field ** 2))), 1e-12)
     return TriangleMesh(base.vertices * (1.0 + bumps * field)[:, None], base.faces)
+
+
+@geometry_kind("icosphere")
+def _icosphere_kind(spec, seed: int):
+    return icosphere(spec.subdivisions, spec.radius), None
+
+
+@geometry_kind("blob")
+def _blob_kind(spec, seed: int):
+    return blob(spec.subdivisions, spec.radius, spec.lobes, spec.depth), None
+
+
+@geometry_kind("bumpy")
+def _bumpy_kind(spec, seed: int):
+    return bumpy(spec.subdivisions, spec.radius, spec.lobes, spec.depth, spec.bumps, spec.frequency, seed), None
+
+
+@geometry_kind("mesh")
+def _mesh_kind(spec, seed: int):
+    return load_mesh_with_uv(spec.file)

@@ -1,15 +1,24 @@
-"""Resolved illumination of a scene: what Mitsuba renders and its exact SH."""
+"""Resolved illumination of a scene: what Mitsuba renders and its exact SH.
+
+Two registries make a new kind one class in one place:
+
+* :data:`LIGHT_KINDS`: the kinds of rendered light (``Illumination.kind``), each a
+  :class:`LightKind` that says whether it is a delta light, its SH and its JSON record;
+* :data:`SPEC_TYPES`: the ``[illumination] type`` values of a scene spec, each a builder
+  from the validated spec to an :class:`Illumination` (``probe-clustered`` builds
+  directional lights).
+"""
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, replace
+from typing import Callable, ClassVar
 
 import numpy as np
 
 from estimator import latlong, sh
-
 from harness.io.images import read_linear_rgb
 from harness.scene.probe import cluster_probe
-from harness.scene.spec import IlluminationSpec
 
 
 @dataclass(frozen=True)
@@ -18,7 +27,7 @@ class Illumination:
 
     Attributes
     ----------
-    kind : 'directional', 'point' or 'envmap'.
+    kind : a registered :class:`LightKind` ('directional', 'point', 'envmap', 'sunsky').
     to_light : (K, 3) unit directions towards directional lights.
     irradiance : (K, 3) their irradiance (on a surface facing the light).
     positions : (K, 3) point light positions.
@@ -40,7 +49,7 @@ class Illumination:
 
     @property
     def is_delta(self) -> bool:
-        return self.kind in ("directional", "point")
+        return LIGHT_KINDS[self.kind].delta
 
     def rotated(self, rotation: np.ndarray) -> "Illumination":
         """The same light turned by ``rotation`` (3, 3) about the world origin."""
@@ -48,21 +57,9 @@ class Illumination:
         return replace(self, to_light=self.to_light @ r.T, positions=self.positions @ r.T,
                        rotation=r @ self.rotation)
 
-    def sh(self, order: int, center: np.ndarray = np.zeros(3)) -> np.ndarray:
-        """((L + 1)^2, 3) SH of the radiance arriving at ``center`` (unfiltered).
-
-        Point lights are taken as seen from ``center`` (direction and 1/d^2 falloff there).
-        """
-        if self.kind == "directional":
-            return sh.project_directional(order, self.to_light, self.irradiance)
-        if self.kind == "point":
-            offset = self.positions - center
-            dist2 = np.sum(offset ** 2, axis=1, keepdims=True)
-            return sh.project_directional(order, offset / np.sqrt(dist2), self.intensity / dist2)
-        if self.kind == "sunsky":
-            return sunsky_sh(self, order)
-        coeffs = sh.project_latlong(order, self.envmap)
-        return sh.rotation_matrix(order, self.rotation) @ coeffs
+    def sh(self, order: int, center: np.ndarray | None = None) -> np.ndarray:
+        """((L + 1)^2, 3) SH of the radiance arriving at ``center`` (unfiltered; None: the origin)."""
+        return LIGHT_KINDS[self.kind].sh(self, order, np.zeros(3) if center is None else center)
 
     def mitsuba_emitters(self, mi) -> dict:
         """Emitter dicts for ``mi.load_dict`` (directions converted to travel direction)."""
@@ -83,60 +80,168 @@ class Illumination:
         return out
 
     def to_json(self) -> dict:
-        """JSON-able description (the envmap itself is stored as an EXR beside it)."""
-        out = {"kind": self.kind}
-        if self.kind == "directional":
-            out["lights"] = [{"to_light": d.tolist(), "irradiance": e.tolist()}
-                             for d, e in zip(self.to_light, self.irradiance)]
-        elif self.kind == "point":
-            out["lights"] = [{"position": p.tolist(), "intensity": i.tolist()}
-                             for p, i in zip(self.positions, self.intensity)]
-        elif self.kind == "sunsky":
-            out["sunsky"] = self.sunsky
-            out["rotation"] = self.rotation.tolist()
-        else:
-            out["envmap_file"] = "envmap.exr"
-            out["rotation"] = self.rotation.tolist()
-        return out
+        """JSON-able description (an envmap itself is stored as an EXR beside it)."""
+        return {"kind": self.kind, **LIGHT_KINDS[self.kind].to_json(self)}
 
     @classmethod
     def from_json(cls, data: dict, envmap: np.ndarray | None = None) -> "Illumination":
-        kind = data["kind"]
-        if kind == "directional":
-            lights = data["lights"]
-            return cls(kind, to_light=np.array([l["to_light"] for l in lights], float).reshape(-1, 3),
-                       irradiance=np.array([l["irradiance"] for l in lights], float).reshape(-1, 3))
-        if kind == "point":
-            lights = data["lights"]
-            return cls(kind, positions=np.array([l["position"] for l in lights], float).reshape(-1, 3),
-                       intensity=np.array([l["intensity"] for l in lights], float).reshape(-1, 3))
-        if kind == "sunsky":
-            return cls(kind, sunsky=data["sunsky"], rotation=np.array(data.get("rotation", np.eye(3)), float))
+        """The light of a :meth:`to_json` record (``envmap``: the map of an 'envmap' record)."""
+        return LIGHT_KINDS[data["kind"]].from_json(data, envmap)
+
+
+class LightKind(ABC):
+    """One kind of rendered light, registered by :func:`light_kind` under its ``name``."""
+
+    name: ClassVar[str] = ""
+    delta: ClassVar[bool] = False   # lights from single directions (the direct integrator renders them)
+
+    @abstractmethod
+    def sh(self, light: Illumination, order: int, center: np.ndarray) -> np.ndarray:
+        """((L + 1)^2, 3) SH of the radiance arriving at ``center`` (3,)."""
+
+    @abstractmethod
+    def to_json(self, light: Illumination) -> dict:
+        """The record's fields beside ``kind``."""
+
+    @abstractmethod
+    def from_json(self, data: dict, envmap: np.ndarray | None) -> Illumination:
+        """The light of a record."""
+
+
+LIGHT_KINDS: dict[str, LightKind] = {}
+
+
+def light_kind(cls: type[LightKind]) -> type[LightKind]:
+    """Class decorator: register a :class:`LightKind` under ``cls.name``."""
+    LIGHT_KINDS[cls.name] = cls()
+    return cls
+
+
+def _rows(data: dict, key: str) -> np.ndarray:
+    return np.array([light[key] for light in data["lights"]], float).reshape(-1, 3)
+
+
+@light_kind
+class Directional(LightKind):
+    """Directional lights: irradiance from single directions."""
+
+    name, delta = "directional", True
+
+    def sh(self, light, order, center):
+        return sh.project_directional(order, light.to_light, light.irradiance)
+
+    def to_json(self, light):
+        return {"lights": [{"to_light": d.tolist(), "irradiance": e.tolist()}
+                           for d, e in zip(light.to_light, light.irradiance)]}
+
+    def from_json(self, data, envmap):
+        return Illumination(self.name, to_light=_rows(data, "to_light"), irradiance=_rows(data, "irradiance"))
+
+
+@light_kind
+class Point(LightKind):
+    """Point lights: radiant intensity from positions (seen from ``center`` with 1/d^2 falloff)."""
+
+    name, delta = "point", True
+
+    def sh(self, light, order, center):
+        offset = light.positions - center
+        dist2 = np.sum(offset ** 2, axis=1, keepdims=True)
+        return sh.project_directional(order, offset / np.sqrt(dist2), light.intensity / dist2)
+
+    def to_json(self, light):
+        return {"lights": [{"position": p.tolist(), "intensity": i.tolist()}
+                           for p, i in zip(light.positions, light.intensity)]}
+
+    def from_json(self, data, envmap):
+        return Illumination(self.name, positions=_rows(data, "position"), intensity=_rows(data, "intensity"))
+
+
+@light_kind
+class Envmap(LightKind):
+    """A lat-long environment map, turned by ``rotation``."""
+
+    name = "envmap"
+
+    def sh(self, light, order, center):
+        return sh.rotation_matrix(order, light.rotation) @ sh.project_latlong(order, light.envmap)
+
+    def to_json(self, light):
+        return {"envmap_file": "envmap.exr", "rotation": light.rotation.tolist()}
+
+    def from_json(self, data, envmap):
         if envmap is None:
             raise ValueError("an envmap illumination needs its lat-long image")
-        return cls(kind, envmap=envmap, rotation=np.array(data.get("rotation", np.eye(3)), float))
+        return Illumination(self.name, envmap=envmap, rotation=np.array(data.get("rotation", np.eye(3)), float))
 
 
-def build_illumination(spec: IlluminationSpec, seed: int = 0) -> Illumination:
-    """Resolve an illumination spec into lights (clustering probes as needed)."""
-    s = spec.scale
-    if spec.type == "directional":
-        d = np.array([l.to_light for l in spec.lights], float)
-        return Illumination("directional", to_light=d / np.linalg.norm(d, axis=1, keepdims=True),
-                            irradiance=s * np.array([l.irradiance for l in spec.lights], float))
-    if spec.type == "point":
-        return Illumination("point", positions=np.array([l.position for l in spec.lights], float),
-                            intensity=s * np.array([l.intensity for l in spec.lights], float))
-    if spec.type == "sunsky":
-        to_sun = np.asarray(spec.to_sun, float)
-        return Illumination("sunsky", sunsky={
-            "to_sun": (to_sun / np.linalg.norm(to_sun)).tolist(), "turbidity": spec.turbidity,
-            "ground_albedo": spec.ground_albedo, "sun_scale": spec.sun_scale, "sky_scale": spec.sky_scale,
-            "scale": s}, rotation=sh.axis_angle_matrix("y", spec.rotation))
-    probe = s * read_linear_rgb(spec.file).astype(np.float64)
-    if spec.type == "probe-clustered":
-        d, e = cluster_probe(probe, spec.count, white=spec.white, seed=seed)
-        return Illumination("directional", to_light=d, irradiance=e)
+@light_kind
+class SunSky(LightKind):
+    """Mitsuba's Hosek-Wilkie ``sunsky``, turned by ``rotation``."""
+
+    name = "sunsky"
+
+    def sh(self, light, order, center):
+        return sunsky_sh(light, order)
+
+    def to_json(self, light):
+        return {"sunsky": light.sunsky, "rotation": light.rotation.tolist()}
+
+    def from_json(self, data, envmap):
+        return Illumination(self.name, sunsky=data["sunsky"], rotation=np.array(data.get("rotation", np.eye(3)), float))
+
+
+SpecBuilder = Callable[..., Illumination]
+SPEC_TYPES: dict[str, SpecBuilder] = {}
+
+
+def illumination_type(name: str, delta: bool = False) -> Callable[[SpecBuilder], SpecBuilder]:
+    """Decorator: register a builder ``(spec, seed) -> Illumination`` for ``[illumination] type =
+    name``; ``delta``: it builds delta lights (rendered by the direct integrator by default)."""
+    def register(builder: SpecBuilder) -> SpecBuilder:
+        builder.delta = delta
+        SPEC_TYPES[name] = builder
+        return builder
+    return register
+
+
+def build_illumination(spec, seed: int = 0) -> Illumination:
+    """Resolve a validated illumination spec into lights (clustering probes as needed)."""
+    return SPEC_TYPES[spec.type](spec, seed)
+
+
+@illumination_type("directional", delta=True)
+def _directional(spec, seed: int) -> Illumination:
+    d = np.array([light.to_light for light in spec.lights], float)
+    return Illumination("directional", to_light=d / np.linalg.norm(d, axis=1, keepdims=True),
+                        irradiance=spec.scale * np.array([light.irradiance for light in spec.lights], float))
+
+
+@illumination_type("point", delta=True)
+def _point(spec, seed: int) -> Illumination:
+    return Illumination("point", positions=np.array([light.position for light in spec.lights], float),
+                        intensity=spec.scale * np.array([light.intensity for light in spec.lights], float))
+
+
+@illumination_type("sunsky")
+def _sunsky(spec, seed: int) -> Illumination:
+    to_sun = np.asarray(spec.to_sun, float)
+    return Illumination("sunsky", sunsky={
+        "to_sun": (to_sun / np.linalg.norm(to_sun)).tolist(), "turbidity": spec.turbidity,
+        "ground_albedo": spec.ground_albedo, "sun_scale": spec.sun_scale, "sky_scale": spec.sky_scale,
+        "scale": spec.scale}, rotation=sh.axis_angle_matrix("y", spec.rotation))
+
+
+@illumination_type("probe-clustered", delta=True)
+def _probe_clustered(spec, seed: int) -> Illumination:
+    probe = spec.scale * read_linear_rgb(spec.file).astype(np.float64)
+    d, e = cluster_probe(probe, spec.count, white=spec.white, seed=seed)
+    return Illumination("directional", to_light=d, irradiance=e)
+
+
+@illumination_type("envmap")
+def _envmap(spec, seed: int) -> Illumination:
+    probe = spec.scale * read_linear_rgb(spec.file).astype(np.float64)
     latlong.directions(*probe.shape[:2])  # validates the map size
     return Illumination("envmap", envmap=probe, rotation=sh.axis_angle_matrix("y", spec.rotation))
 

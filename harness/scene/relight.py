@@ -6,8 +6,7 @@ import os
 
 import numpy as np
 
-from estimator.camera import Camera
-
+from estimator import Camera
 from harness.io.dataset import Dataset
 from harness.io.exr import read_exr
 from harness.scene.illumination import Illumination

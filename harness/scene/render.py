@@ -4,12 +4,17 @@ from __future__ import annotations
 import numpy as np
 from tqdm import tqdm
 
-from estimator import backend
-from estimator.camera import Camera, gl_to_mitsuba, look_at, mitsuba_sensor
-from estimator.data import TriangleMesh
-from estimator.raycast import mitsuba_mesh
-from estimator.sh import axis_angle_matrix, fibonacci_sphere
-
+from estimator import (
+    Camera,
+    TriangleMesh,
+    axis_angle_matrix,
+    backend,
+    fibonacci_sphere,
+    gl_to_mitsuba,
+    look_at,
+    mitsuba_mesh,
+    mitsuba_sensor,
+)
 from harness import plugins
 from harness.scene.illumination import Illumination
 from harness.scene.spec import CameraSpec

@@ -13,7 +13,9 @@ import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
-from estimator.errors import InputError
+from estimator import InputError
+from harness.scene.geometry import GEOMETRY_KINDS
+from harness.scene.illumination import SPEC_TYPES
 
 
 class SpecError(InputError):
@@ -85,7 +87,7 @@ class GeometrySpec:
     file: str | None = None
 
     def validate(self, base_dir: str) -> None:
-        _choice("geometry.type", self.type, ("icosphere", "blob", "bumpy", "mesh"))
+        _choice("geometry.type", self.type, tuple(GEOMETRY_KINDS))
         _num("geometry.bumps", self.bumps, 0, 0.5)
         _num("geometry.frequency", self.frequency, 3, 16, integer=True)
         _num("geometry.subdivisions", self.subdivisions, 0, 8, integer=True)  # 8: 1,310,720 faces
@@ -198,8 +200,8 @@ class IlluminationSpec:
     rotation: float = 0.0
 
     def validate(self, base_dir: str) -> None:
-        kinds = ("directional", "point", "probe-clustered", "envmap", "sunsky")
-        _choice("illumination.type", self.type, kinds)
+
+        _choice("illumination.type", self.type, tuple(SPEC_TYPES))
         _num("illumination.scale", self.scale, 0, lo_open=True)
         if self.type in ("directional", "point"):
             if not self.lights:
@@ -238,7 +240,7 @@ class IlluminationSpec:
 
     @property
     def is_delta(self) -> bool:
-        return self.type in ("directional", "point", "probe-clustered")
+        return SPEC_TYPES[self.type].delta
 
 
 @dataclass
@@ -364,8 +366,10 @@ class FaultSpec:
         parts = [f"{k} {getattr(self, k)}" for k in sorted(on) if getattr(self, k)]
         for kind in ("glare", "occluder"):
             if getattr(self, f"{kind}_views"):
-                parts.append(f"{getattr(self, f'{kind}_views')} {kind} patch(es) of {getattr(self, f'{kind}_size')} px, "
-                             f"value {getattr(self, f'{kind}_value')}")
+                parts.append(
+                    f"{getattr(self, f'{kind}_views')} {kind} patch(es) of {getattr(self, f'{kind}_size')} px, "
+                    f"value {getattr(self, f'{kind}_value')}"
+                )
         return ", ".join(parts)
 
 
@@ -439,8 +443,7 @@ def _build(where: str, raw: dict, cls):
 
 def _estimator_defaults(raw: dict) -> dict:
     """The spec's [estimator] table: estimator settings recommended for this scene."""
-    from estimator.config import EstimatorConfig
-    from estimator.methods import REGISTRY
+    from estimator import REGISTRY, EstimatorConfig
 
     if not isinstance(raw, dict):
         raise SpecError("estimator must be a table")

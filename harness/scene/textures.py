@@ -3,8 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator import latlong
-from estimator.data import TriangleMesh
+from estimator import TriangleMesh, latlong
 
 
 def _barycentric_grid(k: int) -> np.ndarray:

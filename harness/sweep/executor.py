@@ -8,7 +8,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterator
 
-from estimator.errors import InputError
+from estimator import InputError
 
 EXECUTORS = ("local", "dask")
 BLAS_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -87,7 +87,8 @@ def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "loca
 
 def _dask(fn, jobs, scheduler):
     try:
-        from dask.distributed import Client, as_completed as dask_completed
+        from dask.distributed import Client
+        from dask.distributed import as_completed as dask_completed
     except ImportError:
         raise InputError("--executor dask needs Dask: pip install '.[dask]'") from None
     if scheduler is None:

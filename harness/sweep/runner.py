@@ -14,13 +14,11 @@ import time
 
 from tqdm import tqdm
 
-from estimator import backend
-from estimator.errors import InputError
-from reports import sweep as sweep_report
-
+from estimator import InputError, backend
 from harness.cli.reporting import compare_runs
 from harness.sweep.executor import run_jobs, worker_threads
 from harness.sweep.jobs import dataset_job, dataset_payload, identity, run_job
+from reports import sweep as sweep_report
 
 
 def _slug(text: str) -> str:

@@ -21,10 +21,14 @@ import itertools
 import json
 import os
 
-from estimator.config import EstimatorConfig
-from estimator.methods import REGISTRY
-
-from harness.scene.spec import SCENES_DIR, SpecError, load_spec, read_toml, resolve_scene
+from estimator import REGISTRY, EstimatorConfig
+from harness.scene.spec import (
+    SCENES_DIR,
+    SpecError,
+    load_spec,
+    read_toml,
+    resolve_scene,
+)
 
 SUITE_KEYS = {"name", "scenes", "methods", "profile", "seeds"}
 
@@ -56,7 +60,7 @@ def _table_or_name(where: str, entry, name_key: str) -> dict:
     return dict(entry)
 
 
-def load_suite(path_or_name: str, profile: str | None = None) -> dict:
+def load_suite(path_or_name: str, profile: str | None = None) -> dict:  # noqa: C901  (one check per key)
     """Read and validate a suite (path, or a name under scenes/suites/); ``profile``, when
     given, replaces every scene's profile. Returns a dict with
     ``name``, ``path``, ``datasets`` (list of DatasetJob) and ``methods`` (list of MethodEntry)."""
@@ -68,7 +72,9 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:
     raw = read_toml(path, "suite")
     unknown = sorted(set(raw) - SUITE_KEYS)
     if unknown:
-        raise SpecError(f"{path}: unknown suite key(s): {', '.join(unknown)} (allowed: {', '.join(sorted(SUITE_KEYS))})")
+        raise SpecError(
+            f"{path}: unknown suite key(s): {', '.join(unknown)} (allowed: {', '.join(sorted(SUITE_KEYS))})"
+        )
     for key in ("scenes", "methods"):
         if not isinstance(raw.get(key), list) or not raw[key]:
             raise SpecError(f"{path}: suite.{key} must be a non-empty list")

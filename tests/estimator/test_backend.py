@@ -4,7 +4,7 @@ import sys
 
 import pytest
 
-from estimator import backend
+from estimator.rays import backend
 
 
 def test_llvm_version_from_file_names():

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from estimator import camera
+from estimator.core import camera
 
 
 def test_conversions_round_trip():

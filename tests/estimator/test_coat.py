@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from estimator import sh
-from estimator.coat import admissible_scale, coat_rows, fit_coat
-from estimator.reflection import fresnel_dielectric
+from estimator.core import sh
+from estimator.light.coat import admissible_scale, coat_rows, fit_coat
+from estimator.model.reflection import fresnel_dielectric
 
 
 def test_fresnel_limits():

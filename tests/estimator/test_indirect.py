@@ -2,16 +2,17 @@
 direction above a face sees the sphere again."""
 import numpy as np
 
-from estimator.data import TriangleMesh
-from estimator.indirect import indirect_shading
-from estimator.raycast import RayCaster
-from estimator.visibility import compute_visibility, sphere_sampling
-from harness.scene.geometry import icosphere
+from estimator.core.data import TriangleMesh
+from estimator.light.indirect import indirect_shading
+from estimator.rays.raycast import RayCaster
+from estimator.rays.visibility import compute_visibility, sphere_sampling
+
+from .meshes import sphere
 
 
 def test_inside_a_uniform_sphere_the_indirect_shading_is_the_radiance():
-    sphere = icosphere(3)
-    inside = TriangleMesh(sphere.vertices, sphere.faces[:, ::-1])      # normals point inwards
+    ball = sphere(3)
+    inside = TriangleMesh(ball.vertices, ball.faces[:, ::-1])      # normals point inwards
     caster = RayCaster(inside)
     sampling = sphere_sampling(600)
     visibility = compute_visibility(caster, sampling)
@@ -26,7 +27,7 @@ def test_inside_a_uniform_sphere_the_indirect_shading_is_the_radiance():
 
 
 def test_a_convex_object_receives_no_indirect_light():
-    mesh = icosphere(2)
+    mesh = sphere(2)
     caster = RayCaster(mesh)
     sampling = sphere_sampling(300)
     shading = indirect_shading(caster, sampling, compute_visibility(caster, sampling), np.ones((mesh.num_faces, 3)))

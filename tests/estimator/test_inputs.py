@@ -2,13 +2,14 @@
 import numpy as np
 import pytest
 
-from estimator.camera import Camera, look_at
+from estimator import estimate
 from estimator.config import EstimatorConfig
-from estimator.data import MultiViewData, TriangleMesh, View
-from estimator.methods import estimate
-from estimator.observations import Observations, gather_observations
-from estimator.raycast import RayCaster
-from harness.scene.geometry import icosphere
+from estimator.core.camera import Camera, look_at
+from estimator.core.data import MultiViewData, TriangleMesh, View
+from estimator.pipeline.observations import Observations, gather_observations
+from estimator.rays.raycast import RayCaster
+
+from .meshes import sphere
 
 CAM = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, 16, 12)
 
@@ -32,22 +33,22 @@ def test_view_errors():
     with pytest.raises(ValueError, match="NaN or Inf"):
         View("a", CAM, bad)
     with pytest.raises(ValueError, match="no frames"):
-        MultiViewData(icosphere(1), [])
+        MultiViewData(sphere(1), [])
 
 
 def test_cameras_that_see_nothing_are_refused():
     away = Camera.from_fov(look_at([0, 0, 4], [0, 0, 8]), 30, 16, 12)
-    data = MultiViewData(icosphere(1), [View("away", away, np.zeros((12, 16, 3)))])
+    data = MultiViewData(sphere(1), [View("away", away, np.zeros((12, 16, 3)))])
     with pytest.raises(ValueError, match="no camera sees any face"):
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
     good = View("good", CAM, np.zeros((12, 16, 3)))
-    data = MultiViewData(icosphere(1), [good, View("away", away, np.zeros((12, 16, 3)))])
+    data = MultiViewData(sphere(1), [good, View("away", away, np.zeros((12, 16, 3)))])
     with pytest.raises(ValueError, match="1 camera.s. see none of the mesh: away"):
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 
 def test_observations_are_per_face_means_of_pure_pixels():
-    mesh = icosphere(1)
+    mesh = sphere(1)
     caster = RayCaster(mesh)
     cam = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, 64, 64)
     ids = caster.face_id_buffer(cam)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from estimator import latlong
+from estimator.core import latlong
 
 
 def test_mitsuba_envmap_orientation():

@@ -4,12 +4,13 @@ edges, and bad inputs."""
 import numpy as np
 import pytest
 
-from estimator import sh
-from estimator.errors import InputError
-from estimator.lobe_light import dc_from_edges, fit_lobe_light
-from estimator.reflection import diffuse_matrix, lobe_matrix, mirror_directions
-from estimator.visibility import Visibility, sphere_sampling
-from harness.scene.geometry import icosphere
+from estimator.core import sh
+from estimator.core.errors import InputError
+from estimator.light.lobe_light import dc_from_edges, fit_lobe_light
+from estimator.model.reflection import diffuse_matrix, lobe_matrix, mirror_directions
+from estimator.rays.visibility import Visibility, sphere_sampling
+
+from .meshes import sphere
 
 EXPONENT = 10.0
 SPECULAR = 0.2
@@ -30,7 +31,7 @@ def _scene(albedo, views=24):
     """A sphere of 1280 faces seen from cameras all around: rgb = t_d (C . L) + t_s (E . L)
     with the Phong lobe E of :data:`EXPONENT`, a white specular :data:`SPECULAR`, nothing
     blocking (so the lobe's DC reflects alike into every view)."""
-    mesh = icosphere(3)
+    mesh = sphere(3)
     normals = mesh.face_normals
     cameras = sh.fibonacci_sphere(views)
     face, view = np.nonzero(normals @ cameras.T > 0.3)

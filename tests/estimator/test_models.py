@@ -2,14 +2,21 @@
 import numpy as np
 import pytest
 
-from estimator import sh
 from estimator.config import EstimatorConfig
-from estimator.models import (MODELS, DefilteredModel, LobeModel, NoMitsubaEquivalent, PaperModel,
-                              reflection_model)
-from estimator.raycast import RayCaster
-from estimator.reflection import diffuse_matrix, fresnel_dielectric, mirror_directions
-from estimator.visibility import compute_visibility, sphere_sampling
-from harness.scene.geometry import icosphere
+from estimator.core import sh
+from estimator.model.reflection import diffuse_matrix, fresnel_dielectric, mirror_directions
+from estimator.model.reflection_models import (
+    MODELS,
+    DefilteredModel,
+    LobeModel,
+    NoMitsubaEquivalent,
+    PaperModel,
+    reflection_model,
+)
+from estimator.rays.raycast import RayCaster
+from estimator.rays.visibility import compute_visibility, sphere_sampling
+
+from .meshes import sphere
 
 
 @pytest.mark.parametrize("flags, cls", [
@@ -40,7 +47,7 @@ def test_light_conversion_and_mitsuba_materials():
 def test_rows_of_the_three_models_agree_where_they_should():
     # an unshadowed convex sphere: the paper's and the lobe model's diffuse rows are identical,
     # the defiltered model's differ by 1 / Phong filter in degrees <= defilter_order only
-    mesh = icosphere(1)
+    mesh = sphere(1)
     sampling = sphere_sampling(400)
     vis = compute_visibility(RayCaster(mesh), sampling)
     cfg = EstimatorConfig(sh_order=4, directions=400, diffuse_light="defiltered", defilter_order=2)
@@ -50,7 +57,9 @@ def test_rows_of_the_three_models_agree_where_they_should():
     filt = sh.phong_filter(4, cfg.phong_exponent)
     band = sh.degrees(4)
     big = np.abs(c_paper) > 1e-9
-    np.testing.assert_allclose(gains[big & (band[None] <= 2)], (1 / filt[band])[None].repeat(len(c_paper), 0)[big & (band[None] <= 2)])
+    np.testing.assert_allclose(
+        gains[big & (band[None] <= 2)], (1 / filt[band])[None].repeat(len(c_paper), 0)[big & (band[None] <= 2)]
+    )
     np.testing.assert_allclose(gains[big & (band[None] > 2)], 1.0)
     # predict is the bilinear form
     faces = np.arange(5)
@@ -65,7 +74,7 @@ def test_rows_of_the_three_models_agree_where_they_should():
 def test_coated_diffuse_rows_weight_the_cosine_by_the_coats_transmission():
     # under a uniform light, the irradiance through a smooth coat is the bare irradiance
     # times 1 - (hemispherical average of F): 2 int_0^1 F(mu) mu dmu = 0.0918 for ior 1.5
-    mesh = icosphere(1)
+    mesh = sphere(1)
     sampling = sphere_sampling(1164)
     vis = compute_visibility(RayCaster(mesh), sampling)
     bare = diffuse_matrix(mesh, sampling, vis, 2)

@@ -4,11 +4,11 @@ the sun cut out of the map, and bad inputs."""
 import numpy as np
 import pytest
 
-from estimator import latlong, sh
-from estimator.errors import InputError
-from estimator.reflected_light import bilinear_rows, fit_reflected_light, map_differences
-from estimator.reflection import fresnel_dielectric, mirror_directions
-from estimator.visibility import Visibility, sphere_sampling
+from estimator.core import latlong, sh
+from estimator.core.errors import InputError
+from estimator.light.coat_map import bilinear_rows, fit_reflected_light, map_differences
+from estimator.model.reflection import fresnel_dielectric, mirror_directions
+from estimator.rays.visibility import Visibility, sphere_sampling
 
 
 def _rows(true_map, faces=1500, views=24, ior=1.5, seed=0):
@@ -115,7 +115,7 @@ def test_sky_and_sun_cuts_the_brightest_compact_source():
     dirs = latlong.directions(height, width)
     sky = _smooth_map(height, width)
     spot = np.exp(-(np.degrees(np.arccos(np.clip(dirs @ sun_dir, -1, 1))) / 4.0) ** 2)[..., None] * 200.0
-    from estimator.reflected_light import ReflectedLight
+    from estimator.light.coat_map import ReflectedLight
     light = ReflectedLight(sky + spot, np.zeros((1, 3)), np.ones(3), 1, True)
     cut, direction = light.sky_and_sun()
     assert np.degrees(np.arccos(np.clip(direction @ sun_dir, -1, 1))) < 3.0

@@ -3,8 +3,8 @@ without uniform regions; shapes and bad inputs."""
 import numpy as np
 import pytest
 
-from estimator.errors import InputError
-from estimator.retinex import log_shading_fit
+from estimator.core.errors import InputError
+from estimator.light.edge_fit import log_shading_fit
 
 
 def _grid(n: int = 24, seed: int = 0):

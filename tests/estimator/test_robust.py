@@ -3,9 +3,9 @@ longer pulls."""
 import numpy as np
 import pytest
 
-from estimator import robust
-from estimator.errors import InputError
-from estimator.solver import solve_bilinear
+from estimator.core.errors import InputError
+from estimator.solvers import robust
+from estimator.solvers.bilinear import solve_bilinear
 
 
 @pytest.mark.parametrize("loss", ["huber", "cauchy", "tukey"])

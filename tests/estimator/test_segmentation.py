@@ -1,9 +1,11 @@
 """Segmentation on the face graph, per-face quantiles, and region ties."""
 import numpy as np
 
-from estimator.methods import BilinearSegmented
-from estimator.segmentation import albedo_features, group_quantile, segment
-from harness.scene.geometry import icosphere
+from estimator.core.reductions import group_quantile
+from estimator.methods.segmented import BilinearSegmented
+from estimator.solvers.segmentation import albedo_features, segment
+
+from .meshes import sphere
 
 
 def test_group_quantile_matches_numpy():
@@ -30,7 +32,7 @@ def test_features_ignore_dark_channels_but_not_brightness():
 
 
 def test_segment_finds_regions_of_one_albedo_apart_and_together():
-    mesh = icosphere(3)
+    mesh = sphere(3)
     c = mesh.centroids
     truth = np.where(c[:, 1] > 0.4, 0, np.where(c[:, 1] < -0.4, 0, np.where(c[:, 0] > 0, 1, 2)))  # caps share albedo
     palette = np.array([[0.7, 0.5, 0.06], [0.07, 0.05, 0.006], [0.1, 0.2, 0.6]])
@@ -44,7 +46,7 @@ def test_segment_finds_regions_of_one_albedo_apart_and_together():
 
 
 def test_textured_faces_stay_out_of_uniform_regions():
-    mesh = icosphere(3)
+    mesh = sphere(3)
     rng = np.random.default_rng(2)
     albedo = rng.uniform(0.05, 0.9, (mesh.num_faces, 3))
     labels, _ = segment(albedo, mesh.face_adjacency, np.ones(mesh.num_faces, bool))
@@ -54,7 +56,7 @@ def test_textured_faces_stay_out_of_uniform_regions():
 def test_region_ties_follow_the_boundary_ratio():
     # two regions; the second's albedo is wrong by 2x (a light estimate it alone constrains),
     # its boundary says the ratio is 0.25: the tie restores it
-    mesh = icosphere(2)
+    mesh = sphere(2)
     group = (mesh.centroids[:, 1] < 0).astype(np.int64)
     true = np.array([[0.8, 0.6, 0.4], [0.2, 0.15, 0.1]])
     albedo = true[group]

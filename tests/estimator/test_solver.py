@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from estimator.solver import solve_bilinear
+from estimator.solvers.bilinear import solve_bilinear
 
 
 def _problem(rng, components, groups=30, per_group=40, m=16):

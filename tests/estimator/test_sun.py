@@ -3,16 +3,17 @@ irradiance fitted with the light, its direction found by the pattern search."""
 import numpy as np
 import pytest
 
-from estimator import sh
 from estimator.config import EstimatorConfig
-from estimator.models import reflection_model
-from estimator.data import TriangleMesh
-from estimator.raycast import RayCaster
-from estimator.reflection import diffuse_matrix, fresnel_dielectric
-from estimator.retinex import log_shading_fit
-from estimator.sun import brightest_direction, find_sun, sun_shading
-from estimator.visibility import compute_visibility, sphere_sampling
-from harness.scene.geometry import bumpy, icosphere
+from estimator.core import sh
+from estimator.core.data import TriangleMesh
+from estimator.light.edge_fit import log_shading_fit
+from estimator.light.sun import brightest_direction, find_sun, sun_shading
+from estimator.model.reflection import diffuse_matrix, fresnel_dielectric
+from estimator.model.reflection_models import reflection_model
+from estimator.rays.raycast import RayCaster
+from estimator.rays.visibility import compute_visibility, sphere_sampling
+
+from .meshes import lobed, sphere
 
 
 def _unit(v):
@@ -21,7 +22,7 @@ def _unit(v):
 
 
 def test_convex_object_shading_is_the_cosine_over_pi():
-    mesh = icosphere(2)
+    mesh = sphere(2)
     d = _unit([0.3, 0.8, -0.2])
     np.testing.assert_allclose(np.pi * sun_shading(mesh, RayCaster(mesh), d), np.maximum(mesh.face_normals @ d, 0),
                                atol=1e-12)
@@ -30,7 +31,7 @@ def test_convex_object_shading_is_the_cosine_over_pi():
 def test_a_blocker_casts_a_full_shadow():
     """A sphere above another: faces of the lower sphere under the upper one are dark for a
     sun overhead, lit for a sun at the horizon."""
-    a, b = icosphere(2), icosphere(2)
+    a, b = sphere(2), sphere(2)
     vertices = np.vstack([a.vertices, b.vertices + [0.0, 3.0, 0.0]])
     mesh = TriangleMesh(vertices, np.vstack([a.faces, b.faces + len(a.vertices)]))
     caster = RayCaster(mesh)
@@ -51,7 +52,7 @@ def test_brightest_direction_of_a_delta_light():
 
 @pytest.fixture(scope="module")
 def scene():
-    mesh = bumpy(3, lobes=3, depth=0.25, bumps=0.06, frequency=7)
+    mesh = lobed(3)
     caster = RayCaster(mesh)
     sampling = sphere_sampling(600)
     c_matrix = diffuse_matrix(mesh, sampling, compute_visibility(caster, sampling), 2)
@@ -98,7 +99,7 @@ def test_the_column_is_the_diffuse_rows_times_the_sun_as_sh(model):
     through the quadrature) matches E x the sun's column on a convex object to within the
     truncation's ringing, for the paper model and the defiltered one (whose rows carry
     1 / Phong filter at the low degrees)."""
-    mesh = icosphere(2)
+    mesh = sphere(2)
     caster = RayCaster(mesh)
     sampling = sphere_sampling()
     reflection = reflection_model(EstimatorConfig(sh_order=10, **model))
@@ -111,7 +112,7 @@ def test_the_column_is_the_diffuse_rows_times_the_sun_as_sh(model):
 
 
 def test_through_a_coat_the_sun_loses_its_fresnel_reflection():
-    mesh = icosphere(2)
+    mesh = sphere(2)
     caster = RayCaster(mesh)
     d = _unit([0.3, 0.8, -0.2])
     bare, coated = sun_shading(mesh, caster, d), sun_shading(mesh, caster, d, coat_ior=1.5)

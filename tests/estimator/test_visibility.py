@@ -1,12 +1,13 @@
 import numpy as np
 import pytest
 
-from estimator import sh
-from estimator.data import TriangleMesh
-from estimator.raycast import RayCaster
-from estimator.reflection import diffuse_matrix, lobe_matrix, mirror_matrix
-from estimator.visibility import compute_visibility, sphere_sampling
-from harness.scene.geometry import blob, icosphere
+from estimator.core import sh
+from estimator.core.data import TriangleMesh
+from estimator.model.reflection import diffuse_matrix, lobe_matrix, mirror_matrix
+from estimator.rays.raycast import RayCaster
+from estimator.rays.visibility import compute_visibility, sphere_sampling
+
+from .meshes import lobed, sphere
 
 
 def test_paper_sphere_sampling():
@@ -21,7 +22,7 @@ def test_paper_sphere_sampling():
 
 
 def test_convex_sphere_sees_its_whole_upper_hemisphere():
-    mesh = icosphere(2)
+    mesh = sphere(2)
     s = sphere_sampling(300)
     vis = compute_visibility(RayCaster(mesh), s)
     upper = mesh.face_normals @ s.directions.T > 0
@@ -32,7 +33,7 @@ def test_convex_sphere_sees_its_whole_upper_hemisphere():
 
 
 def test_chunking_does_not_change_the_result_and_concave_faces_are_shadowed():
-    mesh = blob(3)
+    mesh = lobed(3, lobes=4)
     s = sphere_sampling(200)
     caster = RayCaster(mesh)
     a = compute_visibility(caster, s)

@@ -33,7 +33,8 @@ def test_estimate_refine_poses_writes_the_refined_cameras(tiny_earth, tmp_path, 
     import json
 
     import numpy as np
-    from estimator.pose import reprojection_error
+
+    from estimator.pipeline.pose import reprojection_error
     from harness.io.dataset import read_dataset
 
     run = tmp_path / "run"

@@ -5,15 +5,15 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from estimator.camera import Camera, look_at
-from estimator.data import TriangleMesh
-from reports.ground_truth import GroundTruth
 import harness.scene.generate as generate_module
+from estimator.core.camera import Camera, look_at
+from estimator.core.data import TriangleMesh
 from harness.io.atomic import OutputExistsError, atomic_directory
 from harness.io.dataset import DatasetError, read_dataset, write_dataset, write_ground_truth
 from harness.io.exr import read_exr, write_exr
 from harness.scene.generate import generate
 from harness.scene.spec import load_spec, resolve_scene
+from reports.ground_truth import GroundTruth
 
 
 def test_exr_round_trip(tmp_path):
@@ -42,7 +42,8 @@ def _toy(tmp_path):
 def test_dataset_round_trip_keeps_face_order_and_cameras(tmp_path):
     mesh, cams, images = _toy(tmp_path)
     write_dataset(str(tmp_path), mesh, list(zip(cams[:2], images[:2])), [(cams[2], images[2])], {"scene": "toy"})
-    truth = GroundTruth(np.random.rand(40, 3), np.random.rand(40, 3), np.random.rand(121, 3),
+    rng = np.random.default_rng(0)
+    truth = GroundTruth(rng.random((40, 3)), rng.random((40, 3)), rng.random((121, 3)),
                         {"model": "phong", "exponent": 10.0}, {"kind": "directional", "lights": []},
                         np.arange(40) % 3)
     write_ground_truth(str(tmp_path), truth)

@@ -6,8 +6,8 @@ import os
 import numpy as np
 import pytest
 
-from estimator.camera import Camera, look_at
-from estimator.data import TriangleMesh
+from estimator.core.camera import Camera, look_at
+from estimator.core.data import TriangleMesh
 from harness.io.dataset import read_dataset
 from harness.scene import faults
 from harness.scene.generate import generate

@@ -261,9 +261,15 @@ def test_bad_spec_files_name_the_file(tmp_path, capsys):
 
     mi.Bitmap(np.full((16, 32, 3), 0.5, np.float32)).convert(
         mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(str(png))
-    probe.write_text(open(MICRO).read().replace(
-        '[illumination]\ntype = "directional"\nlights = [{ to_light = [0.4, 0.8, 0.45], irradiance = [3.0, 3.0, 3.0] }]',
-        '[illumination]\ntype = "probe-clustered"\nfile = "probe.png"\ncount = 4'))
+    probe.write_text(
+        open(MICRO)
+        .read()
+        .replace(
+            '[illumination]\ntype = "directional"\n'
+            "lights = [{ to_light = [0.4, 0.8, 0.45], irradiance = [3.0, 3.0, 3.0] }]",
+            '[illumination]\ntype = "probe-clustered"\nfile = "probe.png"\ncount = 4',
+        )
+    )
     assert main(["generate", str(probe), "-o", str(tmp_path / "ldr")]) == 0
     assert "low-dynamic-range" in capsys.readouterr().err
 
@@ -357,7 +363,7 @@ def test_sigterm_leaves_no_partial_output(tmp_path):
 
 def test_internal_errors_keep_their_traceback(copy, tmp_path, monkeypatch):
     ds, _, _ = copy
-    import estimator.methods as methods
+    import estimator as methods
 
     def bug(*args, **kwargs):
         raise ValueError("a bug, not bad input")

@@ -140,11 +140,13 @@ def test_mitsuba_export_renders_the_dataset_in_stock_mitsuba(stock_export, tmp_p
     import sys
     import xml.etree.ElementTree as ET
 
-    from estimator.camera import gl_to_mitsuba
+    from estimator.core.camera import gl_to_mitsuba
 
     folder, out = stock_export
     ds = read_dataset(str(folder))
-    frames = [("train", k, v) for k, v in enumerate(ds.data.views)] + [("test", k, v) for k, v in enumerate(ds.data.test_views)]
+    frames = [("train", k, v) for k, v in enumerate(ds.data.views)] + [
+        ("test", k, v) for k, v in enumerate(ds.data.test_views)
+    ]
     assert sorted(p for p in os.listdir(out) if p.endswith(".xml")) == sorted(f"{s}_{k:03d}.xml" for s, k, _ in frames)
     for split, k, view in frames:
         sensor = ET.parse(out / f"{split}_{k:03d}.xml").getroot().find("sensor")
@@ -177,7 +179,7 @@ def test_estimate_export_imports_back(stock_export, tmp_path):
     """The estimate's stock export (blendbsdf of diffuse and mirror, albedos x 2 at weight
     1/2) read by the XML import gives the estimate's albedos back."""
     from estimator.config import EstimatorConfig
-    from estimator.data import Estimate
+    from estimator.model.estimate import Estimate
     from harness.io.imports import read_mitsuba_xml
     from harness.scene.export import export_scene
 

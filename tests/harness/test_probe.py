@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from estimator import latlong, sh
+from estimator.core import latlong, sh
 from harness.io.images import read_linear_rgb
 from harness.scene.probe import cluster_probe, luminance
 

@@ -5,9 +5,10 @@ import shutil
 import numpy as np
 import pytest
 
-from estimator import sh, sun
+from estimator import estimate
 from estimator.config import EstimatorConfig
-from estimator.methods import estimate
+from estimator.core import sh
+from estimator.light import sun
 from harness.io.dataset import read_dataset, read_ground_truth
 from harness.scene.generate import generate
 from harness.scene.spec import load_spec, resolve_scene

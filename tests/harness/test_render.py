@@ -1,10 +1,11 @@
-import os
 """Rendering: analytic pixel values and the camera convention against Mitsuba."""
+import os
+
 import numpy as np
 import pytest
 
-from estimator.camera import Camera, look_at
-from estimator.data import TriangleMesh
+from estimator.core.camera import Camera, look_at
+from estimator.core.data import TriangleMesh
 from harness.scene.geometry import icosphere
 from harness.scene.illumination import Illumination
 from harness.scene.render import build_scene, render_views
@@ -97,10 +98,10 @@ def test_exported_estimate_renders_in_stock_mitsuba(tmp_path):
     import subprocess
     import sys
 
-    from estimator import backend
     from estimator.config import EstimatorConfig
-    from estimator.data import Estimate
-    from estimator.forward import Predictor
+    from estimator.model.estimate import Estimate
+    from estimator.model.forward import Predictor
+    from estimator.rays import backend
     from harness.scene.export import export_scene
 
     mesh = icosphere(3)
@@ -126,7 +127,7 @@ def test_exported_estimate_renders_in_stock_mitsuba(tmp_path):
 
 def test_sunsky_ground_truth_matches_mitsuba_on_a_white_plane():
     # a white Lambertian plane facing +Y: its radiance is (sky irradiance + sun irradiance cos) / pi
-    from estimator import sh
+    from estimator.core import sh
     from harness.scene.illumination import sunsky_sh
 
     to_sun = np.array([0.5, 0.6, 0.3]) / np.linalg.norm([0.5, 0.6, 0.3])

@@ -1,8 +1,6 @@
 import json
 import os
 
-import numpy as np
-
 from harness.cli.main import main
 from harness.io.exr import read_exr
 from harness.io.runs import read_run

@@ -5,8 +5,8 @@ import os
 
 import pytest
 
+from estimator.core.errors import InputError
 from harness.cli.main import main
-from estimator.errors import InputError
 from harness.scene.spec import SpecError
 from harness.sweep import jobs
 from harness.sweep.executor import run_jobs, worker_threads

@@ -4,7 +4,6 @@ import os
 
 import numpy as np
 import OpenEXR
-import pytest
 import trimesh
 from PIL import Image
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from estimator import sh
+from estimator.core import sh
 from reports import metrics
 from reports.regression import TRACKED, check, make_baseline
 
@@ -35,7 +35,9 @@ def test_known_scales_are_removed():
     image = rng.random((16, 16, 3))
     out = metrics.image_metrics(image * np.array([4.0, 2.0, 0.5]), image, np.ones((16, 16), bool))
     assert out["psnr_linear"] == 100.0
-    assert metrics.image_metrics(image * 2, image, np.ones((16, 16), bool), align=False)["relative_l2"] == pytest.approx(1.0)
+    assert metrics.image_metrics(image * 2, image, np.ones((16, 16), bool), align=False)[
+        "relative_l2"
+    ] == pytest.approx(1.0)
     with pytest.raises(ValueError, match="scale"):
         metrics.albedo_ratios(truth, truth, np.ones(40, bool), "median")
 
@@ -96,3 +98,10 @@ def test_regression_passes_equal_and_fails_worse():
     assert {r["metric"]: r["status"] for r in check(missing, base)}["clusters.ari"] == "missing"
     with pytest.raises(ValueError, match="metrics"):
         check(_metrics(), {})
+
+
+def test_adjusted_rand_index_known_values():
+    a = np.array([0, 0, 1, 1, 2, 2])
+    assert metrics.adjusted_rand_index(a, a) == 1.0
+    assert metrics.adjusted_rand_index(a, np.array([5, 5, 7, 7, 9, 9])) == 1.0
+    assert metrics.adjusted_rand_index(a, np.array([0, 1, 0, 1, 0, 1])) < 0

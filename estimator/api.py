@@ -1,0 +1,122 @@
+"""The estimator's one entry point, :func:`estimate`: pose check, preparation, the method's solve, trust diagnostics."""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .config import EstimatorConfig
+from .core.data import MultiViewData
+from .core.errors import InputError
+from .diagnostics import trust
+from .methods import get_method
+from .model.estimate import Estimate
+from .model.reflection_models import reflection_model
+from .pipeline import pose
+from .pipeline.prepared import prepare, with_config
+from .rays.raycast import RayCaster
+
+EXPONENT_CANDIDATES = (5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0)
+
+# the default for datasets that recommend no method: on the real-light family (36 cases) it
+# reaches a median diffuse PSNR of 33.9 dB against the paper's 24.9 (28 cases meet all three
+# targets against 5; benchmarks/README.md); the paper's algorithm stays available, unchanged,
+# as 'bilinear-clustered', and the previous default as 'bilinear-segmented'
+DEFAULT_METHOD = "retinex-segmented"
+
+
+def estimate(data: MultiViewData, method: str | None = None, config: EstimatorConfig | None = None,
+             known_sh: np.ndarray | None = None, known_radiance: np.ndarray | None = None, log=None,
+             exponent_candidates: tuple[float, ...] | None = None) -> Estimate:
+    """Run a registered method on in-memory data (the estimator's one entry point).
+
+    Parameters
+    ----------
+    method : a registered name; None: :data:`DEFAULT_METHOD`.
+    known_sh : (M', 3) pseudo illumination for 'known-illumination' (truncated/padded to the order).
+    known_radiance : (M', 3) radiance SH, for 'known-illumination' with ``specular_model='lobe'``.
+    log : optional callable receiving progress lines.
+    exponent_candidates : estimate the Phong exponent too: solve with each candidate
+        (observations and shadow function computed once) and keep the lowest final
+        residual. Only models that depend on the exponent qualify
+        (``specular_model='lobe'`` or ``diffuse_light='defiltered'``).
+    """
+    config = config or EstimatorConfig()
+    cls = get_method(method or DEFAULT_METHOD)
+    t0 = time.perf_counter()
+    poses, rounds, offsets = None, config.pose_rounds, None
+    caster = RayCaster(data.mesh, config.variant)   # one for the pose check, the refinement and the solve
+    if rounds == 0 and config.auto_pose > 0 and len(data.views) >= 2:
+        offsets = pose.outline_offsets(data, caster)
+        if np.nanmax(offsets, initial=0.0) > config.auto_pose:
+            rounds = pose.POSE_ROUNDS
+            if log:
+                log(f"a view's outline is {np.nanmax(offsets):.1f} px off its alpha: refining the poses")
+    if rounds > 0:
+        fixed = replace(config, pose_rounds=0, auto_pose=0.0)
+        data, poses = pose.refine_poses(
+            data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates),
+            rounds, min(config.pose_folds, len(data.views)), caster, log)
+    pose_seconds = time.perf_counter() - t0
+    prep = prepare(data, config, log, cls.name, cls.streams, caster)
+    if not np.any(prep.obs.rgb > 0):
+        raise InputError("every observed pixel is black or negative: there is no light to estimate from "
+                         "(check the images' exposure and sign)")
+    t = time.perf_counter()
+    try:
+        est = _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates)
+    except np.linalg.LinAlgError as exc:
+        raise InputError(f"the solve is singular ({exc}): the observations do not determine the albedos and "
+                         "the light (too few lit views or faces?)") from None
+    for name in ("diffuse", "specular", "pseudo_sh"):
+        if not np.all(np.isfinite(getattr(est, name))):
+            raise InputError(f"the solve produced non-finite {name}: the observations do not determine the "
+                             "albedos and the light (too few lit views or faces?)")
+    solve_seconds = time.perf_counter() - t
+    est.info["observations"] = int(len(prep.obs.face))
+    est.info["observations_all"] = int(len(prep.all_obs.face))
+    est.info["unobserved_share"] = float(1.0 - est.observed.mean())
+    est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
+    rejected = prep.all_obs.rejected
+    est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
+    t = time.perf_counter()
+    est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
+    est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
+                           "total": time.perf_counter() - t0}
+    if offsets is not None:
+        est.info["outline_offsets_px"] = {v.name: (None if np.isnan(o) else float(o))
+                                          for v, o in zip(data.views, offsets)}
+    if poses is not None:
+        est.info["timings"]["pose_refinement"] = pose_seconds
+        est.info["poses"] = poses
+    est.face_stats = {**est.face_stats, **stats}
+    automatic = [] if poses is None or config.pose_rounds > 0 else [
+        f"poses refined automatically ({pose.POSE_ROUNDS} rounds): the alpha outline of "
+        f"{data.views[int(np.nanargmax(offsets))].name} lay {np.nanmax(offsets):.1f} px from the mesh's "
+        f"(auto_pose {config.auto_pose:g} px); the corrected cameras are in 'poses'"]
+    est.info["warnings"] = trust.warnings_for(est) + automatic + [
+        f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
+        f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
+        if p["diverged"]]
+    return est
+
+
+def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates) -> Estimate:
+    if exponent_candidates:
+        if not reflection_model(config).uses_exponent:
+            raise InputError("estimating the Phong exponent needs a model that depends on it: "
+                             "specular_model='lobe' or diffuse_light='defiltered'")
+        if not cls.reports_residual:
+            raise InputError(f"estimating the Phong exponent compares the methods' residuals; {cls.name} reports "
+                             "none (choose a method that fits the observations, or give the exponent)")
+        tried = {}
+        for n in exponent_candidates:
+            candidate = cls(replace(config, phong_exponent=float(n)), known_sh, known_radiance)
+            tried[float(n)] = candidate.solve(with_config(prep, candidate.config))
+            if log:
+                log(f"phong exponent {n}: residual {tried[float(n)].info['residuals'][-1]:.5f}")
+        est = min(tried.values(), key=lambda e: e.info["residuals"][-1])
+        est.info["exponent_selection"] = {str(n): e.info["residuals"][-1] for n, e in tried.items()}
+        return est
+    return cls(config, known_sh, known_radiance).solve(prep)

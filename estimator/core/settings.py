@@ -1,0 +1,54 @@
+"""The base of every configuration section.
+
+Each component of the estimator owns one section: a dataclass of its settings, beside the
+code that reads them, with its own checks (``check``). :class:`estimator.config.EstimatorConfig`
+composes every section by inheritance, so the flat setting names (the wire format of scene
+TOML files, suites, ``run.json`` and the command line) stay one namespace, and a section's
+reader may be handed the whole configuration.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from .errors import InputError
+
+
+@dataclass
+class Section:
+    """A configuration section: typed, finite fields with defaults, checked on creation."""
+
+    def __post_init__(self):
+        self._check_types()
+        for cls in reversed(type(self).__mro__):   # every section's own checks, in field order
+            own = cls.__dict__.get("check")
+            if own is not None:
+                for ok, message in own(self):
+                    if not ok:
+                        raise InputError(f"estimator config: {message}")
+
+    def check(self) -> list[tuple[bool, str]]:
+        """(condition, message) pairs; a false condition is refused with its message."""
+        return []
+
+    def _check_types(self) -> None:
+        """Each field has its default's type: int, float (an int is taken), bool or str (a
+        field whose default is None takes None or a string); floats must be finite."""
+        for f in fields(self):
+            value, default = getattr(self, f.name), f.default
+            if default is None:
+                ok = value is None or isinstance(value, str)
+            elif isinstance(default, bool):
+                ok = isinstance(value, bool)
+            elif isinstance(default, int):
+                ok = isinstance(value, int) and not isinstance(value, bool)
+            elif isinstance(default, float):
+                ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+                if ok:
+                    object.__setattr__(self, f.name, float(value))
+            else:
+                ok = isinstance(value, type(default))
+            if not ok:
+                kind = ("a string or null" if default is None else
+                        "a finite number" if isinstance(default, float) else type(default).__name__)
+                raise InputError(f"estimator config: {f.name} must be {kind}, got {value!r}")

@@ -1,0 +1,232 @@
+"""Real spherical harmonics: basis, projection, rotation and the Phong lobe filter.
+
+Convention
+----------
+Real, orthonormal SH on the unit sphere, evaluated on *world* Cartesian
+directions (x, y, z) with the polar axis along world +Z and azimuth
+phi = atan2(y, x). Coefficient (l, m), -l <= m <= l, is stored at index
+l (l + 1) + m; order L has (L + 1)^2 coefficients. With scipy's complex
+``sph_harm_y(l, m, theta, phi)`` (Condon-Shortley phase included):
+
+    Y_l0  = Y_l^0
+    Y_lm  = sqrt(2) (-1)^m Re Y_l^m      (m > 0)
+    Y_lm  = sqrt(2) (-1)^m Im Y_l^|m|    (m < 0)
+
+so the Condon-Shortley phase cancels: Y_1,-1 = +c y, Y_10 = +c z, Y_11 = +c x
+with c = sqrt(3 / (4 pi)).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import special
+
+from . import latlong
+from .errors import InputError
+
+
+def num_coeffs(order: int) -> int:
+    """Number of coefficients of an order-``order`` expansion: (L + 1)^2."""
+    if order < 0:
+        raise InputError(f"SH order must be >= 0, got {order}")
+    return (order + 1) ** 2
+
+
+def order_of(count: int) -> int:
+    """The order L of an expansion with ``count`` = (L + 1)^2 coefficients."""
+    order = int(round(np.sqrt(count))) - 1
+    if order < 0 or (order + 1) ** 2 != count:
+        raise InputError(f"{count} is not a number of SH coefficients (L + 1)^2")
+    return order
+
+
+def index(l: int, m: int) -> int:
+    """Flat index l (l + 1) + m of coefficient (l, m)."""
+    return l * (l + 1) + m
+
+
+def degrees(order: int) -> np.ndarray:
+    """Degree l of every coefficient, shape ((L + 1)^2,)."""
+    return np.repeat(np.arange(order + 1), 2 * np.arange(order + 1) + 1)
+
+
+def basis(order: int, dirs: np.ndarray) -> np.ndarray:
+    """Real SH basis at unit directions.
+
+    Parameters
+    ----------
+    order : int, maximum degree L.
+    dirs : (N, 3) unit vectors.
+
+    Returns
+    -------
+    (N, (L + 1)^2) float64.
+    """
+    d = np.asarray(dirs, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3:
+        raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    out = np.empty((d.shape[0], num_coeffs(order)))
+    xy = np.ones_like(x) + 0j  # (x + i y)^m
+    for m in range(order + 1):
+        # Q_l^m(z) = P_l^m(z) / sin^m(theta) without Condon-Shortley phase.
+        q_prev, q = None, np.full_like(z, special.factorial2(2 * m - 1, exact=False) if m else 1.0)
+        for l in range(m, order + 1):
+            if l == m + 1:
+                q_prev, q = q, (2 * m + 1) * z * q
+            elif l > m + 1:
+                q_prev, q = q, ((2 * l - 1) * z * q - (l + m - 1) * q_prev) / (l - m)
+            k = np.sqrt((2 * l + 1) / (4 * np.pi) * np.exp(special.gammaln(l - m + 1) - special.gammaln(l + m + 1)))
+            if m == 0:
+                out[:, index(l, 0)] = k * q
+            else:
+                out[:, index(l, m)] = np.sqrt(2.0) * k * q * xy.real
+                out[:, index(l, -m)] = np.sqrt(2.0) * k * q * xy.imag
+        xy = xy * (x + 1j * y)
+    return out
+
+
+def rotation_matrix(order: int, rotation: np.ndarray) -> np.ndarray:
+    """SH rotation: coefficients of f(R^T w) are ``M @ c`` when c are those of f(w).
+
+    Parameters
+    ----------
+    order : int
+    rotation : (3, 3) proper rotation R (the function is carried along by R).
+
+    Returns
+    -------
+    M : ((L + 1)^2, (L + 1)^2), block diagonal by degree, orthogonal.
+    """
+    rotation = np.asarray(rotation, dtype=np.float64)
+    if rotation.shape != (3, 3) or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-8):
+        raise InputError("rotation must be a 3x3 orthogonal matrix")
+    pts = fibonacci_sphere(4 * num_coeffs(order) + 64)
+    y = basis(order, pts)
+    y_rot = basis(order, pts @ rotation)  # rows: Y(R^T p)
+    m = np.linalg.lstsq(y, y_rot, rcond=None)[0]
+    # Exact block structure: entries between different degrees are round-off.
+    deg = degrees(order)
+    m[deg[:, None] != deg[None, :]] = 0.0
+    return m
+
+
+def axis_angle_matrix(axis, degrees_: float) -> np.ndarray:
+    """(3, 3) rotation about ``axis`` ('x', 'y', 'z' or a 3-vector) by an angle in degrees."""
+    if isinstance(axis, str):
+        lookup = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}
+        if axis.lower() not in lookup:
+            raise InputError(f"axis must be x, y, z or a 3-vector, got {axis!r}")
+        axis = lookup[axis.lower()]
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    t = np.radians(degrees_)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(t) * k + (1 - np.cos(t)) * k @ k
+
+
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """``n`` nearly uniform unit directions (golden-spiral lattice), shape (n, 3)."""
+    if n < 4:
+        raise InputError(f"need at least 4 directions, got {n}")
+    i = np.arange(n) + 0.5
+    y = 1.0 - 2.0 * i / n
+    r = np.sqrt(1.0 - y * y)
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
+    return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1)
+
+
+def project_directional(order: int, to_light: np.ndarray, irradiance: np.ndarray) -> np.ndarray:
+    """SH of distant light made of delta directions, L(w) = sum_k E_k delta(w - d_k).
+
+    Parameters
+    ----------
+    to_light : (K, 3) unit directions towards each light.
+    irradiance : (K, C) irradiance on a surface facing the light (W/m^2 per channel).
+
+    Returns
+    -------
+    ((L + 1)^2, C) radiance coefficients.
+    """
+    return basis(order, np.asarray(to_light, dtype=np.float64)).T @ np.asarray(irradiance, dtype=np.float64)
+
+
+def project_latlong(order: int, image: np.ndarray) -> np.ndarray:
+    """SH of a lat-long radiance map (H, W, C) in Mitsuba's envmap orientation.
+
+    Returns ((L + 1)^2, C); quadrature over the map's cells (see :mod:`latlong`).
+    """
+    h, w = image.shape[:2]
+    weights = latlong.solid_angles(h, w).reshape(-1)
+    y = basis(order, latlong.directions(h, w).reshape(-1, 3))
+    return (y * weights[:, None]).T @ image.reshape(h * w, -1).astype(np.float64)
+
+
+def to_latlong(coeffs: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Evaluate SH coefficients (M, C) on a lat-long map, shape (H, W, C)."""
+    coeffs = np.asarray(coeffs, dtype=np.float64)
+    order = order_of(coeffs.shape[0])
+    if num_coeffs(order) != coeffs.shape[0]:
+        raise InputError(f"{coeffs.shape[0]} is not a square number of SH coefficients")
+    dirs = latlong.directions(height, width).reshape(-1, 3)
+    return (basis(order, dirs) @ coeffs).reshape(height, width, -1)
+
+
+LARGE_EXPONENT = 1e5  # above it phong_filter uses its asymptotic form (the two agree within 3e-9 there)
+
+
+def phong_filter(order: int, exponent: float) -> np.ndarray:
+    """Per-degree filter of the normalised Phong lobe (n + 1)/(2 pi) max(0, r.w)^n.
+
+    Lambda_l rho_l = (n + 1) * int_0^1 x^n P_l(x) dx (Ramamoorthi & Hanrahan 2001),
+    in closed form:
+        int_0^1 x^n P_l(x) dx = sqrt(pi) 2^(-n-1) Gamma(n+1)
+                                / (Gamma(1 + (n-l)/2) Gamma((n+l+3)/2)).
+    The pseudo illumination's SH are the radiance SH times this filter.
+
+    Returns
+    -------
+    (L + 1,) float64, one value per degree; value 1 at l = 0.
+    """
+    n = float(exponent)
+    if not n > -1.0 or not np.isfinite(n):
+        raise InputError(f"Phong exponent must be finite and > -1, got {exponent}")
+    l = np.arange(order + 1, dtype=np.float64)
+    if n > LARGE_EXPONENT:
+        # the log-gamma differences lose their digits; the lobe is then nearly a delta and
+        # Lambda_l = E[P_l(x)] under (n + 1) x^n = 1 - l(l+1)/(2(n+2)) + O(n^-2)
+        return np.exp(-l * (l + 1) / (2.0 * (n + 2.0)))
+    a = 1.0 + 0.5 * (n - l)
+    log_common = (
+        0.5 * np.log(np.pi) - (n + 1) * np.log(2.0) + special.gammaln(n + 1) - special.gammaln(0.5 * (n + l + 3))
+    )
+    positive = a > 0
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # both branches are evaluated
+        value = np.where(positive, np.exp(log_common - special.gammaln(np.where(positive, a, 1.0))),
+                         np.exp(log_common) * special.rgamma(a))
+    return (n + 1.0) * value
+
+
+def expand_per_degree(per_degree: np.ndarray) -> np.ndarray:
+    """(L + 1,) per-degree values -> ((L + 1)^2,) per coefficient."""
+    per_degree = np.asarray(per_degree)
+    return per_degree[degrees(per_degree.shape[0] - 1)]
+
+
+def phong_filtered(radiance: np.ndarray, exponent: float, order: int | None = None) -> np.ndarray:
+    """Radiance SH (M, C) filtered by the Phong lobe of ``exponent`` (per degree, no
+    renormalisation: the DC is kept), truncated to ``order`` (default: the radiance's)."""
+    radiance = np.asarray(radiance, dtype=np.float64)
+    have = order_of(radiance.shape[0])
+    order = have if order is None else order
+    if order > have:
+        raise InputError(f"the radiance SH have order {have}, cannot filter to order {order}")
+    return radiance[: num_coeffs(order)] * expand_per_degree(phong_filter(order, exponent))[:, None]
+
+
+def pseudo_illumination(radiance: np.ndarray, exponent: float, order: int | None = None) -> np.ndarray:
+    """Radiance SH (M, C) -> pseudo illumination SH, filtered by the Phong lobe of
+    ``exponent``, truncated to ``order`` and normalised to unit DC per channel
+    (the estimate's gauge)."""
+    out = phong_filtered(radiance, exponent, order)
+    dc = np.where(np.abs(out[0]) > 0, out[0], 1.0)
+    return out / dc

@@ -1,0 +1,170 @@
+"""How far an estimate can be trusted, from its inputs alone (no ground truth).
+
+The estimate re-predicts every observation it was solved from; the residuals, relative to
+each face's median colour, give per-view residuals and outlier shares, a per-face standard
+error of the diffuse albedo, and the condition of the light's normal equations. Each
+diagnostic that makes the result doubtful becomes one warning line.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.estimate import Estimate
+from ..pipeline.prepared import Prepared
+from ..solvers.robust import relative_residuals, robust_scale
+
+OUTLIER_SIGMAS = 3.0        # a row is an outlier beyond this many robust scales
+MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-free data)
+GROSS_RESIDUAL = 0.2        # a gross error: residual above 20 % of the exposure level
+OUTLIER_VIEW_SHARE = 0.05   # a view is an outlier when this share of its rows are gross errors ...
+OUTLIER_VIEW_FACTOR = 5.0   # ... and this many times the median view's share ...
+OUTLIER_VIEW_ROWS = 10      # ... and at least this many rows (a few faces of a small view are chance)
+HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
+ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
+MAX_UNKEPT = 0.2            # share of faces without a kept observation
+
+
+CONDITION_ROWS = 200_000    # a streamed problem's light condition is taken on this many rows drawn at random
+
+
+def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 3) residuals of the kept observations under the estimate, (N,) their colour
+    norms relative to the exposure level (:func:`estimator.solvers.robust.relative_residuals`), and
+    (N, 3) each row's diffuse shading C . x."""
+    obs = prep.obs
+    shade = prep.shading(est.light)[obs.face]
+    predicted = est.diffuse[obs.face] * shade + est.specular[obs.face] * prep.gloss(est.light)
+    return obs.rgb - predicted, relative_residuals(obs.rgb, predicted), shade
+
+
+def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
+    """Largest condition number over channels of the light's least-squares system with the
+    albedos fixed (rows: (N,) bool, the observations used), sqrt of the normal matrix's
+    eigenvalue ratio. A streamed problem uses at most :data:`CONDITION_ROWS` of them, drawn
+    at random (seed 0)."""
+    index = np.nonzero(rows)[0]
+    if prep.streamed and len(index) > CONDITION_ROWS:
+        index = np.sort(np.random.default_rng(0).choice(index, CONDITION_ROWS, replace=False))
+    face = prep.obs.face[index]
+    c_rows, d_rows = prep.diffuse_rows(face), prep.specular_rows(index)
+    worst = 1.0
+    for k in range(3):
+        jac = est.diffuse[face, k, None] * c_rows + est.specular[face, k, None] * d_rows
+        eig = np.linalg.eigvalsh(jac.T @ jac)
+        if eig[-1] <= 0:
+            return float("inf")
+        worst = max(worst, float(np.sqrt(eig[-1] / max(eig[0], eig[-1] * 1e-300))))
+    return worst
+
+
+def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict, dict[str, np.ndarray]]:
+    """Trust diagnostics of an estimate.
+
+    Returns
+    -------
+    summary : JSON-ready dict: ``views`` (per view: observations, relative residual
+        (median), outlier share, gross-error share), ``residual`` (median relative residual, robust scale),
+        ``light_condition``, ``albedo_relative_se`` (quantiles over estimated faces),
+        ``outlier_share``.
+    faces : per-face arrays: ``observations`` (F,) kept rows, ``albedo_se`` (F, 3)
+        standard error of the diffuse albedo with the light fixed (inf where unseen).
+    """
+    obs = prep.obs
+    f = obs.num_faces
+    residual, relative, shade = observation_residuals(prep, est)
+    estimated = est.observed[obs.face]
+    scale, outlier = _outliers(relative, estimated)
+    views = []
+    view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
+    for v in range(obs.num_views):
+        sel = (view == v) & estimated
+        views.append({"view": view_names[v] if v < len(view_names) else str(v), "observations": int(sel.sum()),
+                      "residual": float(np.median(relative[sel])) if sel.any() else None,
+                      "outlier_share": float(outlier[sel].mean()) if sel.any() else None,
+                      "gross_share": float(np.mean(relative[sel] > GROSS_RESIDUAL)) if sel.any() else None})
+    # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, residual, estimated, outlier))
+        rel_se = np.linalg.norm(albedo_se, axis=1) / np.linalg.norm(est.diffuse + est.specular, axis=1)
+    counts = np.bincount(obs.face, minlength=f)
+    good = est.observed & np.isfinite(rel_se)
+    summary = {
+        "residual": {"median_relative": float(np.median(relative[estimated])) if estimated.any() else None,
+                     "robust_scale": scale},
+        "outlier_share": float(outlier[estimated].mean()) if estimated.any() else 0.0,
+        "light_condition": _finite_or_none(light_condition(prep, est, estimated & ~outlier)
+                                           if (estimated & ~outlier).any() else float("inf")),
+        "albedo_relative_se": {q: float(np.quantile(rel_se[good], p)) for q, p in
+                               (("median", 0.5), ("p90", 0.9), ("max", 1.0))} if good.any() else None,
+        "observations_per_face": {"median": float(np.median(counts[est.observed])) if est.observed.any() else 0.0,
+                                  "min": int(counts[est.observed].min()) if est.observed.any() else 0},
+        "views": views,
+    }
+    return summary, {"observations": counts.astype(np.int64), "albedo_se": albedo_se}
+
+
+def _outliers(relative: np.ndarray, estimated: np.ndarray) -> tuple[float, np.ndarray]:
+    """(robust scale of the rows of estimated faces, (N,) bool outlier rows)."""
+    scale = robust_scale(relative[estimated]) if estimated.any() else 0.0
+    return scale, relative > OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE)
+
+
+def _precision(face: np.ndarray, num_faces: int, rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray,
+               outlier: np.ndarray) -> np.ndarray:
+    """(F, 3) precision of a per-face albedo with the light fixed: sum over its inlier rows of
+    rows^2 (rows (N, 3): the albedo's coefficient in each observation) / sigma^2, sigma the
+    robust noise level of the residuals (N, 3) per channel; 0 where a face has no row."""
+    sigma = 1.4826 * np.median(np.abs(residual[estimated]), axis=0) if estimated.any() else np.ones(3)
+    info = np.stack([np.bincount(face, rows[:, k] ** 2 * ~outlier, minlength=num_faces) for k in range(3)], 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.nan_to_num(info / np.maximum(sigma, 1e-300)[None] ** 2)
+
+
+def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 3) precisions of the diffuse and of the specular albedo of each face with the light
+    fixed (each as if the other were known), from the estimate's own residuals."""
+    residual, relative, shade = observation_residuals(prep, est)
+    estimated = est.observed[prep.obs.face]
+    _, outlier = _outliers(relative, estimated)
+    face, f = prep.obs.face, prep.obs.num_faces
+    return (_precision(face, f, shade, residual, estimated, outlier),
+            _precision(face, f, prep.gloss(est.light), residual, estimated, outlier))
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def warnings_for(est: Estimate) -> list[str]:
+    """What makes an estimate untrustworthy without ground truth, one line each."""
+    out = []
+    info = est.info
+    dof = info.get("degrees_of_freedom")
+    if dof and dof["unknowns"] >= dof["observations"]:
+        out.append(f"underdetermined: {dof['unknowns']} unknowns for {dof['observations']} observations "
+                   "(the solve fits exactly whatever the truth; add views)")
+    unkept = info.get("faces_without_kept_views", 0.0)
+    if unkept > MAX_UNKEPT:
+        out.append(f"{100 * unkept:.0f} % of the faces have no observation within min_cos_view of their normal")
+    trust = info.get("trust")
+    if not trust:
+        return out
+    cond = trust["light_condition"]
+    if cond is None or cond > ILL_CONDITIONED:
+        out.append(f"ill-conditioned: the light's normal equations have condition number "
+                   f"{'infinite' if cond is None else f'{cond:.3g}'} (parts of the light are not determined by "
+                   "the views; add views or lower sh_order)")
+    shares = [v["gross_share"] for v in trust["views"] if v.get("gross_share") is not None]
+    typical = float(np.median(shares)) if shares else 0.0
+    bad = [v for v in trust["views"] if v.get("gross_share") is not None
+           and v["gross_share"] > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)
+           and v["gross_share"] * v["observations"] >= OUTLIER_VIEW_ROWS]
+    for v in bad:
+        out.append(f"outlier view {v['view']}: {100 * v['gross_share']:.1f} % of its observations are off by over "
+                   f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level (typical view {100 * typical:.1f} %): glare, "
+                   "an occluder or a wrong pose? (pose_rounds / --refine-poses 2 corrects poses)")
+    median = trust["residual"]["median_relative"]
+    if median is not None and median > HIGH_RESIDUAL:
+        out.append(f"high residual: the estimate re-predicts its observations with a median relative error of "
+                   f"{100 * median:.0f} % (the model does not explain these images)")
+    return out

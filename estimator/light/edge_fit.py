@@ -1,0 +1,247 @@
+"""The light from albedo edges: a Retinex prior on the mesh, solved in the log domain.
+
+Neighbouring faces receive nearly the same light, so wherever their albedos agree the
+ratio of their diffuse radiances is the ratio of their shadings, whatever the albedo.
+Albedo changes are sparse (region boundaries, texture edges); a robust loss lets them
+go. With the shading of face f written as s_f = C_f . L (C the reflection model's
+diffuse rows, with the shadow function; L the light, unit DC per channel), the light
+minimises, per channel,
+
+    sum_edges  rho( (l_i - l_j) - (log s_i - log s_j) )
+  + sum_{f in region r}  rho( l_f - log s_f - a_r )          (optional uniform regions)
+  + ridge * n * sum_lm (l (l + 1))^2 L_lm^2
+
+with l_f the log diffuse radiance of face f and a_r the log albedo of region r. The
+first term is the whole prior for textured objects (no region needed); the second ties
+far-apart faces of one uniform region to one albedo. Gauss-Newton on the IRLS weights of
+the chosen M-estimator (:mod:`estimator.solvers.robust`), with steps halved until every shading
+stays positive. The normal equations are formed without the Jacobian: the edges' part is
+g^T L_w g with L_w the weighted graph Laplacian of the face adjacency and g the log
+shading's gradient per face, so time and memory grow with faces x coefficients^2.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+
+from ..core.errors import InputError
+from ..core.gauge import unit_dc
+from ..core.reductions import group_quantile
+from ..core.settings import Section
+from ..solvers import robust
+
+
+@dataclass
+class EdgeFitConfig(Section):
+    """The light from albedo edges (:func:`log_shading_fit`).
+
+    Attributes
+    ----------
+    retinex_quantile : a face's diffuse radiance is this quantile of its colours over the
+        views (low: a coat's highlights move with the view and rarely reach it).
+    retinex_ridge : weight of the (l (l + 1))^2 penalty on the light, per row (a
+        tie-breaker for coefficients the shading does not see).
+    retinex_iterations : Gauss-Newton steps of the edge fit per channel.
+    """
+
+    retinex_quantile: float = 0.2
+    retinex_ridge: float = 1e-9
+    retinex_iterations: int = 30
+
+    def check(self):
+        return [
+            (0 <= self.retinex_quantile <= 1, "retinex_quantile must lie in [0, 1]"),
+            (self.retinex_ridge >= 0, "retinex_ridge must be >= 0"),
+            (self.retinex_iterations >= 1, "retinex_iterations must be >= 1"),
+        ]
+
+
+def _degrees(m: int) -> np.ndarray:
+    """(m,) SH degree of each light column; columns past the last full order (a sun,
+    :mod:`estimator.light.sun`) get degree 0, so the ridge leaves them free."""
+    order = int(np.sqrt(m)) - 1
+    sh_part = np.concatenate([np.full(2 * l + 1, l, dtype=float) for l in range(order + 1)])
+    return np.concatenate([sh_part, np.zeros(m - len(sh_part))])
+
+
+def usable_edges(edges: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (E',) i and j of the edges (E, 2) whose two faces are usable ((F,) bool): the
+    edges every fit and cost here runs over."""
+    pair = usable[edges[:, 0]] & usable[edges[:, 1]]
+    return edges[pair, 0], edges[pair, 1]
+
+
+def edge_residuals(radiance: np.ndarray, shading: np.ndarray, edges: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """(E', 3) log radiance ratio minus log shading ratio across the :func:`usable_edges`;
+    radiance and shading (F, 3), positive where usable."""
+    i, j = usable_edges(edges, usable)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.log(radiance[i] / radiance[j]) - np.log(
+            np.maximum(shading[i], 1e-300) / np.maximum(shading[j], 1e-300)
+        )
+    return ratio
+
+
+def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usable: np.ndarray,
+                    labels: np.ndarray | None = None, initial: np.ndarray | None = None,
+                    loss: str = "cauchy", ridge: float = EdgeFitConfig.retinex_ridge,
+                    iterations: int = EdgeFitConfig.retinex_iterations,
+                    indirect: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Light and region albedos that explain the log radiance ratios of neighbouring faces.
+
+    Parameters
+    ----------
+    radiance : (F, 3) diffuse radiance of each face (linear, > 0 where ``usable``).
+    c_matrix : (F, M) diffuse rows: the shading of face f under light L is c_matrix[f] @ L.
+    edges : (E, 2) pairs of neighbouring faces.
+    usable : (F,) bool, faces whose radiance enters the fit.
+    labels : (F,) int uniform region of each face, -1 outside every region (None: edges only).
+    initial : (M, 3) starting light (None: DC only).
+    loss : robust loss of :func:`estimator.solvers.robust.irls_weights` ('none' is least squares).
+    ridge : weight of the (l (l + 1))^2 penalty on the light's coefficients, per row.
+    iterations : Gauss-Newton steps per channel (stops earlier when the step is tiny).
+    indirect : (F, 3) shading added to C L (light the object reflects onto itself,
+        :mod:`estimator.light.indirect`); it fixes the light's scale, so the DC is fitted too.
+
+    Returns
+    -------
+    light : (M, 3) light with unit DC per channel (the scale is a gauge), or at its own
+        scale with ``indirect``.
+    region_albedo : (R, 3) albedo of each region (R = labels.max() + 1; (0, 3) without labels).
+    """
+    f, m = c_matrix.shape
+    if radiance.shape != (f, 3) or usable.shape != (f,):
+        raise InputError(f"radiance must be (F, 3) and usable (F,) with F = {f} faces of c_matrix, "
+                         f"got {radiance.shape} and {usable.shape}")
+    if edges.ndim != 2 or edges.shape[1] != 2 or (len(edges) and (edges.min() < 0 or edges.max() >= f)):
+        raise InputError(f"edges must be (E, 2) face indices below {f}, got shape {edges.shape}")
+    labels = np.full(f, -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
+    if labels.shape != (f,):
+        raise InputError(f"labels must be (F,) = ({f},), got {labels.shape}")
+    i, j = usable_edges(edges, usable)
+    member = np.nonzero(usable & (labels >= 0))[0]
+    group = labels[member]
+    regions = int(labels.max()) + 1 if len(member) else 0
+    if len(i) + len(member) == 0:
+        raise InputError("the light fit needs two usable neighbouring faces or a uniform region")
+    light = np.zeros((m, 3)) if initial is None else np.array(initial[:m], dtype=float)
+    if initial is None:
+        light[0] = 1.0
+    if indirect is None:
+        light = unit_dc(light)[0]
+    penalty = ridge * (len(i) + len(member)) * (_degrees(m)[1:] * (_degrees(m)[1:] + 1)) ** 2
+    albedo = np.zeros((regions, 3))
+    with np.errstate(divide="ignore"):
+        log_radiance = np.log(np.where(usable[:, None], radiance, 1.0))
+    # signed (E', F) incidence B: an edge's log ratio is (B x)_e, its Jacobian row -(B g)_e
+    incidence = sparse.csr_matrix((np.concatenate([np.ones(len(i)), -np.ones(len(i))]),
+                                   (np.tile(np.arange(len(i)), 2), np.concatenate([i, j]))), shape=(len(i), f))
+    for c in range(3):
+        light[:, c], albedo[:, c] = _fit_channel(log_radiance[:, c], c_matrix, incidence, member, group, regions,
+                                                 light[:, c], usable, loss, penalty, iterations,
+                                                 None if indirect is None else indirect[:, c])
+    return light, np.exp(albedo)
+
+
+def _fit_channel(ell, c_matrix, incidence, member, group, regions, light, usable, loss, penalty, iterations,
+                 extra=None):
+    """One channel's Gauss-Newton fit. Unknowns: the light's coefficients from ``first`` on
+    (1: the DC is the gauge; 0 with an additive ``extra`` shading, which fixes the scale)
+    and the regions' log albedos."""
+    first = 1 if extra is None else 0
+    extra = np.zeros(len(ell)) if extra is None else extra
+    penalty = np.concatenate([[0.0], penalty]) if first == 0 else penalty
+    shade = c_matrix @ light + extra
+    if np.any(shade[usable] <= 0):
+        light = np.zeros_like(light)
+        light[0] = 1.0
+        shade = c_matrix @ light + extra
+    log_shade = np.log(np.maximum(shade, 1e-300))
+    alpha = (group_quantile(group, (ell - log_shade)[member][:, None], regions, 0.5, interpolate=True)[:, 0]
+             if regions else np.zeros(0))
+    k = len(light) - first
+    n = k + regions
+    for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
+        residual = _residuals(ell, log_shade, incidence, member, group, alpha)
+        weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
+        normal, gradient = _normal_equations(c_matrix[:, first:] / shade[:, None], incidence, member, group,
+                                             regions, weights, residual)
+        normal[:k, :k] += np.diag(penalty)
+        gradient[:k] += penalty * light[first:]
+        step = -np.linalg.solve(normal + 1e-12 * np.trace(normal) / n * np.eye(n), gradient)
+        t = 1.0
+        while t > 1e-4:
+            trial = light.copy()
+            trial[first:] += t * step[:k]
+            trial_shade = c_matrix @ trial + extra
+            if np.all(trial_shade[usable] > 0):
+                break
+            t *= 0.5
+        else:
+            break  # no positive step: keep the light
+        light, shade = trial, trial_shade
+        log_shade = np.log(np.maximum(shade, 1e-300))
+        alpha = alpha + t * step[k:]
+        if np.linalg.norm(t * step) < 1e-7 * max(1.0, float(np.linalg.norm(light))):
+            break
+    return light, alpha
+
+
+def _residuals(ell, log_shade, incidence, member, group, alpha) -> np.ndarray:
+    """(E' + R',) edge residuals (log radiance ratio minus log shading ratio) then region residuals."""
+    edge = incidence @ (ell - log_shade)
+    region = ell[member] - log_shade[member] - alpha[group] if len(member) else np.zeros(0)
+    return np.concatenate([edge, region])
+
+
+def _normal_equations(g, incidence, member, group, regions, weights, residual):
+    """Gauss-Newton normal equations (J^T W J, J^T W r) of :func:`_residuals` with respect to
+    the light coefficients and the regions' log albedos, without forming J.
+
+    ``g`` (F, k) is the log shading's gradient per face (diffuse rows over the shading). An
+    edge's row is -(g_i - g_j) = -(B g)_e with B the (E', F) signed ``incidence`` matrix, so
+    the edges give g^T B^T W B g (a weighted graph Laplacian) and -g^T B^T W r; a region
+    row of face f in group r is [-g_f, -e_r]. Memory and time grow with faces x k^2, not
+    edges x k^2.
+    """
+    k = g.shape[1]
+    ne = incidence.shape[0]
+    w_edge, w_region = weights[:ne], weights[ne:]
+    r_edge, r_region = residual[:ne], residual[ne:]
+    laplacian = incidence.T @ sparse.diags(w_edge) @ incidence
+    normal = np.zeros((k + regions, k + regions))
+    gradient = np.zeros(k + regions)
+    normal[:k, :k] = g.T @ (laplacian @ g)
+    gradient[:k] = -(g.T @ (incidence.T @ (w_edge * r_edge)))
+    if len(member):
+        gm = g[member]
+        normal[:k, :k] += (gm * w_region[:, None]).T @ gm
+        gradient[:k] -= gm.T @ (w_region * r_region)
+        cross = sparse.csr_matrix((w_region, (group, np.arange(len(member)))), shape=(regions, len(member))) @ gm
+        normal[:k, k:] = cross.T
+        normal[k:, :k] = cross
+        normal[k:, k:] = np.diag(np.bincount(group, w_region, minlength=regions))
+        gradient[k:] = -np.bincount(group, w_region * r_region, minlength=regions)
+    return normal, gradient
+
+
+def edge_scale(residuals: np.ndarray) -> np.ndarray:
+    """(3,) robust scale per channel of edge residuals (E, 3) (:func:`edge_residuals`)."""
+    return np.array([robust.robust_scale(np.abs(residuals[:, c])) for c in range(residuals.shape[1])])
+
+
+def edge_cost(residuals: np.ndarray, scale: np.ndarray) -> float:
+    """Cauchy-shaped cost sum log(1 + (r / s)^2) of edge residuals (E, 3) at fixed per-channel
+    scales (3,): the sun's cost, with the scales of the sunless fit, so two lights compare."""
+    return float(np.sum(np.log1p((residuals / scale) ** 2)))
+
+
+def edge_cost_ratio(base: np.ndarray, trial: np.ndarray) -> float:
+    """The robust cost (:func:`edge_cost`) of ``trial`` edge residuals over that of ``base``
+    (both (E, 3)), each channel's scale taken from ``base``; edges that are non-finite in
+    either (an unlit face) are left out. Below 1: the trial light explains the edges better."""
+    finite = np.all(np.isfinite(base), axis=1) & np.all(np.isfinite(trial), axis=1)
+    scale = edge_scale(base[finite])
+    return edge_cost(trial[finite], scale) / max(edge_cost(base[finite], scale), 1e-300)

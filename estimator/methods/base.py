@@ -1,0 +1,164 @@
+"""The method contract: the :class:`Method` base class and the registry of methods by name.
+
+A new method is one class in its own file of this room, decorated with
+:func:`register_method` and imported in ``estimator/methods/__init__.py``."""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..model.estimate import Estimate
+from ..model.reflection_models import reflection_model
+from ..pipeline.prepared import Prepared
+from ..solvers import robust
+from ..solvers.bilinear import BilinearResult, solve_bilinear
+
+if TYPE_CHECKING:   # the config composes every room's section, this one's too
+    from ..config import EstimatorConfig
+
+
+REGISTRY: dict[str, type["Method"]] = {}
+
+def register_method(cls: type["Method"]) -> type["Method"]:
+    """Class decorator: make a method available under ``cls.name``."""
+    if not getattr(cls, "name", None):
+        raise InputError(f"{cls.__name__} needs a 'name'")
+    REGISTRY[cls.name] = cls
+    return cls
+
+
+def get_method(name: str) -> type["Method"]:
+    if name not in REGISTRY:
+        raise InputError(f"unknown method {name!r}; registered: {', '.join(sorted(REGISTRY))}")
+    return REGISTRY[name]
+
+
+class Method(ABC):
+    """A way to turn prepared observations into an Estimate."""
+
+    name: ClassVar[str] = ""
+    needs_illumination: ClassVar[bool] = False
+    default_loss: ClassVar[str] = "none"
+    streams: ClassVar[bool] = False   # solve() accepts a streamed problem (Prepared.streamed)
+    # info["residuals"] holds the relative residual after each step, the last the final fit's:
+    # what the Phong exponent is selected by (tests/estimator/test_method_contract.py checks it)
+    reports_residual: ClassVar[bool] = True
+
+    def __init__(self, config: EstimatorConfig, known_sh: np.ndarray | None = None,
+                 known_radiance: np.ndarray | None = None):
+        self.config = config
+        self.model = reflection_model(config)
+        self.known_sh = known_sh
+        self.known_radiance = known_radiance
+
+    @abstractmethod
+    def solve(self, prep: Prepared) -> Estimate: ...
+
+    def _from_groups(self, prep: Prepared, face_group: np.ndarray, result: BilinearResult,
+                     observed: np.ndarray, info: dict) -> Estimate:
+        f = prep.data.mesh.num_faces
+        diffuse, specular = np.zeros((f, 3)), np.zeros((f, 3))
+        diffuse[observed] = result.diffuse[face_group[observed]]
+        specular[observed] = result.specular[face_group[observed]]
+        labels = np.where(observed, face_group, -1).astype(np.int64)
+        groups = len(np.unique(face_group[prep.obs.face]))
+        per_group = 2 if self.config.components == "both" else 1
+        light_unknowns = 0 if self.needs_illumination else result.light.shape[0] - 1   # unit DC: the gauge
+        info = {**info, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
+                "lm_steps": [len(r) for r in result.lm_residuals],
+                "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),
+                                       "unknowns": int(3 * (groups * per_group + light_unknowns))}}
+        radiance = result.light if self.model.light == "radiance" else None
+        return Estimate(diffuse, specular, self.model.pseudo_from_light(result.light), labels, observed,
+                        self.name, self.config, info, radiance)
+
+    def _solve_groups(self, prep: Prepared, face_group: np.ndarray, num_groups: int,
+                      fixed_light: np.ndarray | None = None, weights: np.ndarray | None = None) -> BilinearResult:
+        """The bilinear solve over groups; ``weights`` (N,) scale each observation's squared
+        residual. With ``config.robust_loss`` other than 'none', the solve is iteratively
+        reweighted (:mod:`estimator.solvers.robust`): glints are clipped at ``glint_ratio`` x the
+        face's median colour first, then ``robust_rounds`` rounds reweight every row by the
+        loss of its relative residual. The result's ``weights`` are the final ones."""
+        base = np.ones(len(prep.obs.face)) if weights is None else weights
+        if self.loss == "none":
+            result = self._weighted_solve(prep, face_group, num_groups, fixed_light, weights)
+            result.weights = base
+            return result
+        w = base * self._initial_weights(prep)
+        result = None
+        for round_ in range(self.config.robust_rounds + 1):
+            result = self._weighted_solve(prep, face_group, num_groups, fixed_light, w,
+                                          None if result is None else result.light)
+            if round_ < self.config.robust_rounds:
+                w = base * self._reweight(prep, face_group, result, base)
+        result.weights = w
+        return result
+
+    @property
+    def loss(self) -> str:
+        """The robust loss in use: ``config.robust_loss``, or the method's own for 'auto'."""
+        return self.default_loss if self.config.robust_loss == "auto" else self.config.robust_loss
+
+    def _initial_weights(self, prep: Prepared) -> np.ndarray:
+        """(N,) glint clipping before the first robust solve (ones without a robust loss)."""
+        if self.loss == "none":
+            return np.ones(len(prep.obs.face))
+        obs = prep.obs
+        return robust.initial_weights(obs.face, obs.rgb, obs.num_faces, self.config.glint_ratio)
+
+    def _reweight(self, prep: Prepared, face_group: np.ndarray, result: BilinearResult,
+                  base: np.ndarray | None = None) -> np.ndarray:
+        """(N,) robust weights of every observation under ``result`` (ones without a robust
+        loss); the scale is taken over the rows with ``base`` > 0."""
+        obs = prep.obs
+        if self.loss == "none":
+            return np.ones(len(obs.face))
+        g = face_group[obs.face]
+        predicted = self.model.predict(result.diffuse[g], result.specular[g], prep.c_rows, prep.d_rows, result.light)
+        r = robust.relative_residuals(obs.rgb, predicted)
+        return robust.irls_weights(r, self.loss, robust.robust_scale(r, base))
+
+    def _weighted_solve(self, prep: Prepared, face_group: np.ndarray, num_groups: int,
+                        fixed_light: np.ndarray | None, weights: np.ndarray | None,
+                        initial_light: np.ndarray | None = None) -> BilinearResult:
+        """One bilinear solve; rows are multiplied by the square root of ``weights`` (the
+        model is linear in its rows)."""
+        c = self.config
+        rgb, c_rows, d_rows = prep.obs.rgb, prep.c_rows, prep.d_rows
+        if weights is not None:
+            root = np.sqrt(weights)[:, None]
+            rgb, c_rows, d_rows = rgb * root, c_rows * root, d_rows * root
+        return solve_bilinear(rgb, face_group[prep.obs.face], c_rows, d_rows, num_groups,
+                              c.components, c.iterations, c.tol, fixed_light, schedule=c.lm_schedule,
+                              initial_light=initial_light)
+
+    def _solve_per_face(self, prep: Prepared, fixed_light: np.ndarray | None = None) -> Estimate:
+        """Every observed face its own group. A streamed problem (:attr:`Prepared.streamed`)
+        is solved in two steps of bounded memory: the light from the observations of
+        ``config.light_faces`` observed faces drawn at random (seed 0), then every face's
+        albedos with that light fixed, on the rows' projections onto it."""
+        group, observed, g = _per_face_groups(prep)
+        info = {"clusters": g}
+        if not prep.streamed:
+            return self._from_groups(prep, group, self._solve_groups(prep, group, g, fixed_light), observed, info)
+        light = fixed_light
+        if light is None:
+            seen = np.nonzero(observed)[0]
+            sample = np.sort(np.random.default_rng(0).choice(seen, min(self.config.light_faces, len(seen)),
+                                                             replace=False))
+            sub = prep.face_subset(sample)
+            sub_group, _, sub_g = _per_face_groups(sub)
+            light = self._solve_groups(sub, sub_group, sub_g).light
+            info["light_faces"] = int(len(sample))
+        result = self._solve_groups(prep.projected(light), group, g, np.eye(3))
+        result.light = light
+        return self._from_groups(prep, group, result, observed, info)
+
+
+def _per_face_groups(prep: Prepared) -> tuple[np.ndarray, np.ndarray, int]:
+    observed = prep.obs.observed_faces()
+    group = np.cumsum(observed) - 1
+    return np.where(observed, group, 0), observed, int(observed.sum())

@@ -1,0 +1,73 @@
+"""The first hypothesis: the light from albedo edges (with a sun when one is found), and the
+uniform regions under it, tied to one albedo each when they hold like regions."""
+from __future__ import annotations
+
+import numpy as np
+
+from ...light import edge_fit, sun
+from ...solvers.segmentation import assign_to_regions, segment
+from .shading import deviation, divide
+from .values import FitContext, Hypothesis, LightSource, Shading
+
+
+def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None) -> Hypothesis:
+    """The light fitted to the edges of ``radiance`` (F, 3) (:func:`edge_fit.log_shading_fit`).
+
+    ``found``: the sun of an earlier fit (None: search for one when ``sun_min_gain`` < 1); it
+    joins the shading when it lowered the edge cost by ``sun_min_gain`` and its irradiance is
+    positive. Regions are then found under that light and, when they hold
+    (:func:`tied_regions`), the light is fitted again with each region tied to one albedo."""
+    c, prep = ctx.config, ctx.prep
+    mesh = prep.data.mesh
+    shading = Shading(prep.c_matrix)
+    if found is None and c.sun_min_gain < 1:
+        found = sun.find_sun(radiance, shading.columns, ctx.edges, ctx.usable, mesh, prep.caster,
+                             prep.sampling.directions, loss=ctx.loss,
+                             coat_ior=c.coat_ior if c.coat_correction else None)
+    if found is not None and found.cost_ratio <= 1 - c.sun_min_gain:
+        shading = shading.with_sun(found, sun.sun_shading(mesh, prep.caster, found.direction, found.coat_ior))
+    light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
+    if shading.sun is not None and np.any(light[-1] <= 0):   # no dark "sun"
+        shading = Shading(prep.c_matrix)
+        light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
+    albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
+    labels, _ = segment(np.where(lit[:, None], albedo, 1.0), ctx.edges, lit, c.segment_threshold, c.uniform_spread)
+    hypothesis = Hypothesis(radiance, light, shading, albedo, lit, labels, int(labels.max()) + 1,
+                            float(np.mean(labels[lit] >= 0)), LightSource.EDGES, found)
+    if hypothesis.regions and hypothesis.share >= c.retinex_min_uniform_share:
+        hypothesis = tied_regions(ctx, hypothesis)
+    if hypothesis.source is LightSource.EDGES:   # a texture: every face keeps its own albedo
+        hypothesis.regions, hypothesis.labels = 0, np.full(mesh.num_faces, -1, dtype=np.int64)
+    return hypothesis
+
+
+def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
+    """The light refitted with each uniform region's faces tied to one albedo (twice; faces near
+    a region in albedo join it after the first fit), taken when the regions hold: the regions'
+    deviation (the median over their faces of the mean over channels of |log(face albedo /
+    region albedo)|, each face's own albedo under the tied light) is at most
+    ``region_max_deviation``, or its drift (that deviation over the same median between
+    neighbouring faces of a region: noise alone gives about 0.7, a texture chained into one
+    region by small steps drifts further) is at most ``region_max_drift``.
+
+    Returns the tied hypothesis, or ``edges_only`` with the deviation and drift measured."""
+    c, h = ctx.config, edges_only
+    labels, light = np.where(h.lit, h.labels, -1), h.light
+    for _ in range(2):
+        light, region_albedo = edge_fit.log_shading_fit(h.radiance, h.shading.columns, ctx.edges, ctx.usable, labels,
+                                                        initial=light, **ctx.fit)
+        albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
+        joined = assign_to_regions(labels, albedo, lit, ctx.edges, 2.5 * c.segment_threshold)
+        labels = np.where(lit & (joined < h.regions), joined, -1)
+    tied = lit & (labels >= 0)
+    a, b = ctx.edges[:, 0], ctx.edges[:, 1]
+    inside = tied[a] & tied[b] & (labels[a] == labels[b])
+    spread = deviation(albedo[tied], region_albedo[labels[tied]]) if tied.any() else np.inf
+    noise = deviation(albedo[a[inside]], albedo[b[inside]]) if inside.any() else 0.0
+    drift = spread / max(noise, 1e-12)
+    h.deviation, h.drift = spread, drift
+    if not (spread <= c.region_max_deviation or drift <= c.region_max_drift):
+        return h
+    albedo[tied] = region_albedo[labels[tied]]
+    return Hypothesis(h.radiance, light, h.shading, albedo, lit, labels, h.regions, h.share,
+                      LightSource.EDGES_AND_REGIONS, h.found, spread, drift)

@@ -1,0 +1,133 @@
+"""The orchestrator of ``retinex-segmented``: the radiance, the light decision, the estimate,
+and the coat's correction around them."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ...core.errors import InputError
+from ...core.reductions import group_quantile
+from ...core.settings import Section
+from ...light import coat, indirect, sun
+from ...model.estimate import Estimate
+from ..base import Method, register_method
+from .decision import decide_light
+from .result import to_estimate
+from .values import FitContext, LightSource, ReflectionFits
+
+
+@dataclass
+class RegionConfig(Section):
+    """When ``retinex-segmented`` ties faces to uniform regions.
+
+    Attributes
+    ----------
+    retinex_min_uniform_share : faces are tied to regions only when this share of the lit
+        faces lies in one; below it the object is a texture and the edges alone set the light.
+    region_max_deviation, region_max_drift : the regions are dropped (a texture) when, under
+        the light fitted with them tied, the median face's own albedo deviates from its
+        region's (mean over channels of |log ratio|) by more than ``region_max_deviation``
+        *and* by more than ``region_max_drift`` times the median such difference between
+        neighbouring faces of a region (noise alone gives about 0.7).
+    """
+
+    retinex_min_uniform_share: float = 0.5
+    region_max_deviation: float = 0.065
+    region_max_drift: float = 1.85
+
+    def check(self):
+        return [
+            (0 <= self.retinex_min_uniform_share <= 1, "retinex_min_uniform_share must lie in [0, 1]"),
+            (self.region_max_deviation > 0 and self.region_max_drift > 0,
+             "region_max_deviation and region_max_drift must be > 0"),
+        ]
+
+
+@register_method
+class RetinexSegmented(Method):
+    """The light from albedo edges and uniform regions, in the log domain (beyond the paper).
+
+    1. A face's diffuse radiance is a low quantile (``retinex_quantile``) of its colours
+       over the views.
+    2. The light is fitted to the log radiance ratios of neighbouring faces, with a robust
+       loss that lets albedo edges go (:func:`estimator.light.edge_fit.log_shading_fit`): a
+       Retinex prior on the mesh, which needs no region and holds on textures.
+    3. Radiance over that shading gives per-face albedos; uniform regions are found on the
+       face-adjacency graph (:func:`estimator.solvers.segmentation.segment`).
+    4. When at least ``retinex_min_uniform_share`` of the lit faces lie in uniform
+       regions, the light is fitted again with each region's faces tied to one albedo
+       (far-apart faces of a region constrain the light as the edges cannot), and each
+       region takes that albedo, unless the faces drift from their region's albedo beyond
+       ``region_max_deviation`` and ``region_max_drift`` times the noise between neighbours
+       (a texture chained into regions). Otherwise the edges alone set the light and every
+       face keeps its own albedo (a texture).
+    5. The specular albedo is solved with that light fixed (per region; faces outside
+       every region share the regions' median, or one fit over all faces without regions).
+    6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
+       light's low orders (``coat_order``) is fitted to the colours' changes across views
+       (:mod:`estimator.light.coat`), scaled down until at most ``coat_max_negative`` more of the
+       observations would turn non-positive, subtracted, and steps 1-5 run again.
+
+    On a coated texture (step 4 finds no uniform regions, the edge search kept no sun) the
+    light comes instead from the coat's reflection (:mod:`estimator.light.coat_map`), which
+    the texture cannot bias, when that map is determined and explains at least
+    ``reflected_min_explained`` of the view changes; step 6 is then skipped. The albedo is
+    then that fit's diffuse radiance (the coat's reflection removed, its exit transmission
+    1 - F(n . v) divided out) over the light's shading through the coat (the cosine weighted
+    by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``); on a texture the light's SH
+    part is fitted to the edges of that diffuse radiance, beside the map's sun. Where the
+    map's light fails that gate but the map explains at least
+    ``reflected_diffuse_min_explained``, the light still comes from the edges, fitted on
+    that diffuse radiance through the coat. Where a
+    shared Phong lobe without Fresnel explains the view changes better than the coat
+    (``reflected_lobe``), the light comes from the lobe's reflection
+    (:mod:`estimator.light.lobe_light`) and regions are found again under it.
+    """
+
+    name = "retinex-segmented"
+    default_loss = "cauchy"
+
+    def solve(self, prep):
+        c = self.config
+        if c.components == "specular":
+            raise InputError("retinex-segmented estimates the diffuse albedo from shading; for specular-only "
+                             "data (components='specular') use bilinear-per-face")
+        t = time.perf_counter()
+        fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations
+        est = self._fit(prep, fits)
+        weight = np.zeros(3)
+        if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
+            obs = prep.obs
+            rows = coat.coat_rows(prep.data.mesh.face_normals[obs.face], obs.view_dir,
+                                  est.light, c.coat_order, c.coat_ior)
+            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss)
+            weight = weight * coat.admissible_scale(obs.rgb, weight * rows, c.coat_max_negative)
+            coat_level = np.median(np.linalg.norm(weight * rows, axis=1))
+            if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
+                s = est.info["sun"]
+                found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
+                                      c.coat_ior if s["through_coat"] else None)
+                est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), fits, found)
+            else:
+                weight = np.zeros(3)  # negligible: not applied
+        est.info["coat_weight"] = weight.tolist()
+        est.info["clustering_s"] = time.perf_counter() - t
+        return est
+
+    def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None) -> Estimate:
+        """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
+        (None: search for one when ``sun_min_gain`` < 1)."""
+        c = self.config
+        mesh, obs = prep.data.mesh, prep.obs
+        radiance = group_quantile(obs.face, obs.rgb, mesh.num_faces, c.retinex_quantile)
+        usable = np.all(np.isfinite(radiance) & (radiance > 0), axis=1)
+        if not usable.any():
+            raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
+        ctx = FitContext(prep, c, self.model, self.loss, fits, mesh.face_adjacency, usable,
+                         dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations))
+        if c.interreflection:
+            ctx.fit["indirect"] = ctx.extra = indirect.indirect_shading(
+                prep.caster, prep.sampling, prep.visibility, np.where(usable[:, None], radiance, 0.0))
+        return to_estimate(ctx, decide_light(ctx, radiance, found), self)

@@ -1,0 +1,114 @@
+"""The values the stages of ``retinex-segmented`` pass on: where the light came from, the
+shading (with its sun), one light hypothesis, and the solve's context."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...light.coat_map import ReflectedLight
+from ...light.lobe_light import LobeLight
+from ...light.sun import Sun
+from ...model.reflection_models import ReflectionModel
+from ...pipeline.observations import Observations
+from ...pipeline.prepared import Prepared
+
+if TYPE_CHECKING:   # the config composes every room's section, this one's too
+    from ...config import EstimatorConfig
+
+
+class LightSource(str, Enum):
+    """Where the light came from; the value is the run's ``info['light_from']``."""
+
+    EDGES = "edges"
+    EDGES_AND_REGIONS = "edges and regions"
+    COAT_MAP = "reflection"
+    COAT_MAP_AND_REGIONS = "reflection and regions"
+    COAT_MAP_DIFFUSE = "reflection's diffuse, edges' light"
+    LOBE = "reflection (lobe)"
+    LOBE_AND_REGIONS = "reflection (lobe) and regions"
+
+    @property
+    def models_the_coat(self) -> bool:
+        """True when the light came from a reflection fit, which already holds the coat."""
+        return self.value.startswith("reflection")
+
+
+@dataclass(frozen=True)
+class Shading:
+    """Each face's shading columns: (F, M) for the SH light, then the sun's column when ``sun``
+    is set (its irradiance is the light's last row)."""
+
+    columns: np.ndarray
+    sun: Sun | None = None
+
+    def with_sun(self, sun: Sun, column: np.ndarray) -> "Shading":
+        """(F, M + 1): these columns and the sun's (F,) column."""
+        return Shading(np.hstack([self.columns, column[:, None]]), sun)
+
+
+@dataclass
+class Hypothesis:
+    """One way the light may be: the light with its shading, and what follows under it.
+
+    Attributes
+    ----------
+    radiance : (F, 3) each face's diffuse radiance the light was fitted to.
+    light : (M', 3) the light unknown (the sun's irradiance last when ``shading.sun``).
+    shading : the columns the light multiplies.
+    albedo : (F, 3) radiance over the shading (a region's faces share its albedo).
+    lit : (F,) faces whose albedo is determined.
+    labels : (F,) uniform region of each face, -1 outside every region.
+    regions : number of uniform regions (0: a texture).
+    share : share of the lit faces that the segmentation put in uniform regions.
+    source : where the light came from.
+    found : the sun the search found (reported even when unused), or None.
+    deviation, drift : the regions' deviation and drift (None: not measured).
+    """
+
+    radiance: np.ndarray
+    light: np.ndarray
+    shading: Shading
+    albedo: np.ndarray
+    lit: np.ndarray
+    labels: np.ndarray
+    regions: int
+    share: float
+    source: LightSource
+    found: Sun | None
+    deviation: float | None = None
+    drift: float | None = None
+
+
+@dataclass
+class ReflectionFits:
+    """The view-dependent fits of one solve, made on first need from the observations before any
+    coat correction: the coat's map, and the lobe's light with its rows (None rows: the preview
+    on a subset of faces failed the gate)."""
+
+    observations: Observations
+    coat_map: ReflectedLight | None = None
+    lobe: tuple[LobeLight, np.ndarray | None] | None = None
+
+
+@dataclass
+class FitContext:
+    """What every stage of one fit reads: the prepared problem, the settings, and per-face facts
+    of the fit (the mesh's edges, the usable faces, the edge fit's keyword arguments)."""
+
+    prep: Prepared
+    config: "EstimatorConfig"
+    model: ReflectionModel
+    loss: str
+    fits: ReflectionFits
+    edges: np.ndarray
+    usable: np.ndarray
+    fit: dict[str, Any] = field(default_factory=dict)
+    extra: Any = 0.0   # (F, 3) indirect shading, or 0.0
+
+    @property
+    def sky_width(self) -> int:
+        """M: the SH light's columns (without a sun)."""
+        return self.prep.c_matrix.shape[1]

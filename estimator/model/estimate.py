@@ -1,0 +1,58 @@
+"""The result of a method: per-face albedos and the light, in ``mesh.ply`` face order."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..core import sh
+from .reflection_models import ReflectionModel, reflection_model
+
+if TYPE_CHECKING:   # the config composes every room's section; the result only holds it
+    from ..config import EstimatorConfig
+
+
+@dataclass
+class Estimate:
+    """The result of a method, per face in ``mesh.ply`` order.
+
+    Attributes
+    ----------
+    diffuse, specular : (F, 3) linear albedo (0 where not observed).
+    pseudo_sh : (M, 3) pseudo illumination h, unit DC per channel.
+    labels : (F,) int64 cluster of each face, -1 where not observed.
+    observed : (F,) bool faces with an estimate.
+    method : registry name; config : the EstimatorConfig used.
+    info : timings (s) per stage, solver residuals, counts.
+    radiance_sh : (M, 3) radiance L (unit DC) when the reflection model solves for it
+        (``specular_model='lobe'``: h = L x Phong filter loses the degrees where the
+        filter vanishes); else None.
+    face_stats : per-face trust arrays (:func:`estimator.diagnostics.trust.diagnose`): ``observations``
+        (F,) kept rows, ``albedo_se`` (F, 3) standard error of the diffuse albedo.
+    """
+
+    diffuse: np.ndarray
+    specular: np.ndarray
+    pseudo_sh: np.ndarray
+    labels: np.ndarray
+    observed: np.ndarray
+    method: str
+    config: EstimatorConfig
+    info: dict = field(default_factory=dict)
+    radiance_sh: np.ndarray | None = None
+    face_stats: dict = field(default_factory=dict)
+
+    @property
+    def model(self) -> "ReflectionModel":
+        """The reflection model of ``config``."""
+        return reflection_model(self.config)
+
+    @property
+    def light(self) -> np.ndarray:
+        """(M, 3) the light unknown of the model: L for a radiance model, else h."""
+        return self.radiance_sh if self.model.light == "radiance" else self.pseudo_sh
+
+    @property
+    def sh_order(self) -> int:
+        return sh.order_of(self.pseudo_sh.shape[0])

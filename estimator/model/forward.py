@@ -1,0 +1,62 @@
+"""The forward model: predict the image of any camera from an estimate."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..core import sh
+from ..core.camera import Camera
+from ..core.data import TriangleMesh
+from ..core.errors import InputError
+from ..rays.raycast import RayCaster
+from ..rays.visibility import compute_visibility, sphere_sampling
+from .estimate import Estimate
+from .reflection import mirror_directions
+
+
+class Predictor:
+    """Renders an estimate's reflection model, R = t_d (C . x) + t_s (D . x), per pixel.
+
+    The diffuse matrix and shadow function are computed once; each pixel uses
+    its face (centre ray), the mirrored direction of its own view ray, and the
+    face's shadow function.
+
+    Parameters
+    ----------
+    mesh : TriangleMesh (the estimate's face order).
+    estimate : Estimate.
+    """
+
+    def __init__(self, mesh: TriangleMesh, estimate: Estimate):
+        if estimate.diffuse.shape[0] != mesh.num_faces:
+            raise InputError(f"the estimate has {estimate.diffuse.shape[0]} faces, the mesh {mesh.num_faces}")
+        self.mesh, self.estimate, self.model = mesh, estimate, estimate.model
+        self.caster = RayCaster(mesh, estimate.config.variant)
+        self.sampling = sphere_sampling(estimate.config.directions)
+        self.visibility = compute_visibility(self.caster, self.sampling)
+        self.c_matrix = self.model.diffuse_matrix(mesh, self.sampling, self.visibility)
+
+    def light(self, rotation: np.ndarray | None = None) -> np.ndarray:
+        """(M, 3) the estimate's light unknown, turned by ``rotation`` (3, 3) when given."""
+        x = self.estimate.light
+        return x if rotation is None else sh.rotation_matrix(self.estimate.sh_order, rotation) @ x
+
+    def predict(self, camera: Camera, rotation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted image of ``camera``.
+
+        Returns
+        -------
+        rgb : (H, W, 3) float32 linear; 0 on background and unestimated faces.
+        coverage : (H, W) float32, 1 where the pixel centre sees the mesh.
+        """
+        est = self.estimate
+        origins, dirs = camera.pixel_rays()
+        face, _ = self.caster.first_hits(origins, dirs)
+        hit = np.nonzero(face >= 0)[0]
+        f = face[hit]
+        mirror = mirror_directions(self.mesh.face_normals[f], -dirs[hit])
+        d_rows = self.model.specular_rows(f, mirror, self.sampling, self.visibility)
+        value = self.model.predict(est.diffuse[f], est.specular[f], self.c_matrix[f], d_rows, self.light(rotation))
+        rgb = np.zeros((camera.height * camera.width, 3), dtype=np.float32)
+        rgb[hit] = value
+        coverage = (face >= 0).astype(np.float32)
+        return rgb.reshape(camera.height, camera.width, 3), coverage.reshape(camera.height, camera.width)

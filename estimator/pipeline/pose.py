@@ -1,0 +1,377 @@
+"""Per-view pose refinement: small rotation and translation updates of each training camera
+that align its image with the image the estimate predicts for it, the mesh held fixed.
+
+The surface points seen through a view's covered pixels carry the predicted radiance
+(:class:`estimator.model.forward.Predictor`, at the current pose). A pose update moves where those
+points project; the update minimises the difference between the observed image sampled
+there and the prediction (direct photometric alignment, Lucas-Kanade on the rigid motion):
+
+    E(xi) = sum_p rho( I(pi(T(xi)^-1 P_p)) - r_p ),
+
+with P_p a point in the camera frame, T(xi) applied on the right of the camera-to-world
+matrix (:func:`rigid_update`: ``omega`` turns the camera about the centre of the surface it
+sees, ``t`` moves it in its own frame), rho the Cauchy loss and I the observed image. Gauss-Newton steps with
+Levenberg-Marquardt damping run from coarse to fine: both images are blurred by a Gaussian
+of each scale in turn, so an error of several pixels lies inside the first scale's basin.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from ..core.camera import Camera
+from ..core.data import MultiViewData, View
+from ..core.errors import InputError
+from ..core.settings import Section
+from ..model.estimate import Estimate
+from ..model.forward import Predictor
+from ..rays.raycast import RayCaster
+from ..solvers.robust import TUNING, irls_weights, robust_scale
+
+# Gaussian sigmas (pixels) of the coarse-to-fine levels; 2 degrees at a 256-pixel, 40-degree
+# view is about 13 pixels, inside the first level's basin
+POSE_SCALES = (8.0, 4.0, 2.0, 1.0)
+SILHOUETTE_SCALES = (16.0, 8.0, 4.0, 2.0)   # the first, silhouette-only move
+POSE_ROUNDS = 2          # alignment rounds against held-out estimates
+POSE_STEPS = 10          # Gauss-Newton steps per level
+POSE_MAX_DEGREES = 10.0  # a correction beyond this turn, or beyond POSE_MAX_SHIFT x the distance to
+POSE_MAX_SHIFT = 0.25    # the mesh, is a divergence (against a poor estimate), not a calibration error
+POSE_MIN_GAIN = 1e-4     # a level stops when a step lowers the cost by less than this share
+POSE_MIN_VIEWS = 3       # a held-out estimate from fewer views is too poor to align with
+POSE_LEVEL_POINTS = 10   # a blurred level with fewer sampled points is skipped
+POSE_MIN_POINTS = 200    # a view with fewer covered pixels keeps its pose
+
+
+@dataclass
+class PoseConfig(Section):
+    """Per-view pose refinement before the solve (:func:`refine_poses`).
+
+    Attributes
+    ----------
+    pose_rounds : rounds of refinement (0 trusts the cameras): each camera first moves so
+        the mesh's silhouette matches the view's alpha, then each round the views are split
+        into ``pose_folds`` interleaved groups and each group is aligned with the image an
+        estimate from the other groups predicts.
+    pose_folds : view groups per round.
+    auto_pose : with ``pose_rounds`` 0, the poses are refined anyway (:data:`POSE_ROUNDS`
+        rounds) when any view's alpha outline lies more than this many pixels from the
+        mesh's outline under its camera (:func:`outline_offsets`; 0: never).
+    """
+
+    pose_rounds: int = 0
+    pose_folds: int = 4
+    auto_pose: float = 1.0
+
+    def check(self):
+        return [
+            (self.pose_rounds >= 0, "pose_rounds must be >= 0"),
+            (self.auto_pose >= 0, "auto_pose must be >= 0 (0: never)"),
+            (self.pose_folds >= 2, "pose_folds must be >= 2 (a view group is aligned against an estimate "
+                                   "from the other views)"),
+        ]
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """(3,) -> (3, 3) cross-product matrix, skew(a) @ b = a x b."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rigid_update(delta: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """(4, 4) camera-frame motion of ``delta`` = (omega (3,) radians, Rodrigues; t (3,)): a
+    turn by R(omega) about ``pivot`` (3,), then a shift by t: [R, t + pivot - R pivot; 0 1]."""
+    omega, t = np.asarray(delta[:3], dtype=np.float64), np.asarray(delta[3:], dtype=np.float64)
+    angle = np.linalg.norm(omega)
+    k = skew(omega / angle) if angle > 0 else np.zeros((3, 3))
+    m = np.eye(4)
+    m[:3, :3] = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    m[:3, 3] = t + pivot - m[:3, :3] @ pivot
+    return m
+
+
+def projection_jacobian(points: np.ndarray, pivot: np.ndarray, fx: float, fy: float) -> np.ndarray:
+    """d(pixel)/d(delta) at delta = 0 for camera-frame points (OpenGL: looks down -Z) under
+    :func:`rigid_update` about ``pivot`` (3,).
+
+    Parameters
+    ----------
+    points : (N, 3) camera-frame positions (z < 0 in front).
+
+    Returns
+    -------
+    (N, 2, 6): columns omega (radians) then t (world units), rows (column, row) pixels.
+    """
+    x, y, depth = points[:, 0], points[:, 1], -points[:, 2]
+    du = np.stack([fx / depth, np.zeros_like(depth), fx * x / depth ** 2], axis=1)   # d(column)/dP'
+    dv = np.stack([np.zeros_like(depth), -fy / depth, -fy * y / depth ** 2], axis=1)  # d(row)/dP'
+    # P' = R^T (P - pivot - t) + pivot: dP'/domega = skew(P - pivot), dP'/dt = -I, and
+    # g^T skew(q) = (g x q)^T for any gradient row g
+    q = points - pivot
+    return np.stack([np.concatenate([np.cross(du, q), -du], axis=1),
+                     np.concatenate([np.cross(dv, q), -dv], axis=1)], axis=1)
+
+
+def _sample(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Bilinear samples (N, C) of ``image`` (H, W, C) at continuous pixel coordinates (N, 2)
+    (pixel centres at half-integers; clamped at the border)."""
+    height, width = image.shape[:2]
+    x = np.clip(xy[:, 0] - 0.5, 0.0, width - 1.0)
+    y = np.clip(xy[:, 1] - 0.5, 0.0, height - 1.0)
+    x0 = np.minimum(x.astype(np.int64), max(width - 2, 0))
+    y0 = np.minimum(y.astype(np.int64), max(height - 2, 0))
+    x1, y1 = np.minimum(x0 + 1, width - 1), np.minimum(y0 + 1, height - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    top = (1.0 - fx) * image[y0, x0] + fx * image[y0, x1]
+    bottom = (1.0 - fx) * image[y1, x0] + fx * image[y1, x1]
+    return (1.0 - fy) * top + fy * bottom
+
+
+def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
+    return gaussian_filter(image.astype(np.float32), sigma=(sigma, sigma, 0), mode="constant")
+
+
+def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray, camera: Camera,
+           steps: int, free: np.ndarray, fallback: Camera | None = None) -> tuple[Camera, float, float]:
+    """Damped Gauss-Newton alignment at one level of the parameters where ``free`` (6,) bool
+    is set, from ``camera`` or from ``fallback`` when that fits this level better (so the
+    result never fits worse than either); returns (camera, cost before, cost after)."""
+    grad_row, grad_col = np.gradient(observed, axis=(0, 1))
+    gradients = np.concatenate([grad_col, grad_row], axis=2)        # (H, W, 2C)
+    channels = observed.shape[2]
+    scale = max(float(np.median(np.abs(template))), 1e-6)
+
+    def residual(cam: Camera):
+        xy, depth = cam.project(points_world)
+        inside = (depth > 0) & (xy[:, 0] >= 0) & (xy[:, 0] <= cam.width) & (xy[:, 1] >= 0) & (xy[:, 1] <= cam.height)
+        r = np.where(inside[:, None], _sample(observed, xy) - template, 0.0) / scale
+        return r, xy, inside
+
+    pivot_world = points_world.mean(axis=0)   # the camera turns about the seen surface's centre
+    cam, damping = camera, 1e-3
+    r, xy, inside = residual(cam)
+    spread = robust_scale(np.linalg.norm(r[inside], axis=1))   # fixed for the level: one cost throughout
+
+    def cost(r):   # the Cauchy loss whose IRLS weights are used below
+        return float(np.sum(np.log1p((np.linalg.norm(r, axis=1) / (TUNING["cauchy"] * spread)) ** 2)))
+
+    if fallback is not None:
+        r_f, xy_f, inside_f = residual(fallback)
+        if cost(r_f) < cost(r):
+            cam, r, xy, inside = fallback, r_f, xy_f, inside_f
+    first = current = cost(r)
+    for _ in range(steps):
+        w2c = np.linalg.inv(cam.c2w)
+        p_cam = points_world @ w2c[:3, :3].T + w2c[:3, 3]
+        pivot = w2c[:3, :3] @ pivot_world + w2c[:3, 3]
+        j_pix = projection_jacobian(p_cam, pivot, cam.fx, cam.fy)                      # (N, 2, 6)
+        g = _sample(gradients, xy).reshape(-1, 2, channels)                     # (N, 2, C)
+        jac = (g[:, 0, :, None] * j_pix[:, 0, None, :] + g[:, 1, :, None] * j_pix[:, 1, None, :]) / scale
+        w = irls_weights(np.linalg.norm(r, axis=1), "cauchy", spread) * inside
+        jac = jac.reshape(-1, 6)[:, free]
+        w, rr = np.repeat(w, channels), r.reshape(-1)
+        normal = jac.T @ (jac * w[:, None])
+        rhs = -jac.T @ (w * rr)
+        while damping < 1e8:
+            delta = np.zeros(6)
+            delta[free] = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), rhs)
+            if not np.all(np.isfinite(delta)):
+                damping *= 10.0
+                continue
+            trial = dataclasses.replace(cam, c2w=cam.c2w @ rigid_update(delta, pivot))
+            r_t, xy_t, inside_t = residual(trial)
+            c_t = cost(r_t)
+            if c_t < current:
+                gain = 1.0 - c_t / current
+                cam, r, xy, inside, current = trial, r_t, xy_t, inside_t, c_t
+                damping = max(damping / 3.0, 1e-6)
+                break
+            damping *= 10.0
+        else:
+            break
+        if gain < POSE_MIN_GAIN:
+            break
+    return cam, first, current
+
+
+def _refine(view: View, caster: RayCaster, predictor: Predictor | None, scales: tuple[float, ...],
+            steps: int, free: np.ndarray) -> tuple[Camera, dict]:
+    """One view's camera aligned from coarse to fine: the prediction and the silhouette
+    against the image and its alpha (``predictor`` given), or the silhouette alone."""
+    cam = view.camera
+    info = {"pixels": 0, "cost": [0.0, 0.0]}
+    alpha = silhouette(view)
+    # the surface points and their predicted radiance, at the starting pose: a pose error of a
+    # few pixels barely changes what a point looks like, only where it lands
+    origins, dirs = cam.pixel_rays()
+    face, t = caster.first_hits(origins, dirs)
+    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predictor is None and alpha is None):
+        return cam, info
+    coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
+    if predictor is None:
+        predicted, seen = coverage, alpha[..., None]
+    else:
+        predicted = predictor.predict(cam)[0]
+        seen = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
+        if alpha is not None:   # the silhouette as one more channel, at the colours' level
+            level = float(np.median(np.linalg.norm(predicted.reshape(-1, 3)[face >= 0], axis=1)))
+            predicted = np.concatenate([predicted, level * coverage], axis=2)
+            seen = np.concatenate([seen, level * alpha[..., None]], axis=2)
+    rows, cols = np.divmod(np.arange(len(face)), cam.width)
+    for k, sigma in enumerate(scales):
+        stride = max(1, int(sigma // 2))   # a blurred level needs fewer samples
+        covered = np.nonzero((face >= 0) & (rows % stride == 0) & (cols % stride == 0))[0]
+        if len(covered) < POSE_LEVEL_POINTS:
+            continue
+        points = origins[covered] + t[covered, None] * dirs[covered]
+        template = _blur(predicted, sigma).reshape(-1, predicted.shape[2])[covered]
+        finest = k == len(scales) - 1   # the result must fit at least as well as the given pose
+        cam, before, after = _align(_blur(seen, sigma), template, points, cam, steps, free,
+                                    view.camera if finest else None)
+        info["pixels"], info["cost"] = int(len(covered)), [before, after]
+    return cam, info
+
+
+def silhouette(view: View) -> np.ndarray | None:
+    """The view's alpha (H, W) clipped to [0, 1] when it has a background (some pixel below
+    0.5); None otherwise: an alpha of ones (an opaque image) says nothing about the outline."""
+    if view.alpha is None or not np.any(view.alpha < 0.5):
+        return None
+    return np.clip(view.alpha, 0.0, 1.0)
+
+
+def refine_view(view: View, predictor: Predictor, scales: tuple[float, ...] = POSE_SCALES,
+                steps: int = POSE_STEPS) -> tuple[Camera, dict]:
+    """One view's camera (all 6 degrees of freedom) aligned with ``predictor``'s image of it.
+
+    Returns
+    -------
+    camera : the refined Camera (the input one when too few pixels are covered).
+    info : dict with 'pixels' used and 'cost' (robust cost before and after, finest level).
+    """
+    return _refine(view, predictor.caster, predictor, scales, steps, np.ones(6, dtype=bool))
+
+
+def centre_view(view: View, caster: RayCaster, scales: tuple[float, ...] = SILHOUETTE_SCALES,
+                steps: int = POSE_STEPS) -> Camera:
+    """One view's camera moved (no turn) so the mesh's silhouette matches the view's alpha:
+    the pose error that shifts the whole object, found without any estimate. Views without
+    alpha keep their camera."""
+    free = np.array([False, False, False, True, True, True])
+    return _refine(view, caster, None, scales, steps, free)[0]
+
+
+def pose_change(before: Camera, after: Camera) -> dict:
+    """{'rotation_deg', 'translation'} of the motion from ``before`` to ``after``."""
+    correction = np.linalg.inv(before.c2w) @ after.c2w
+    cos = np.clip(0.5 * (np.trace(correction[:3, :3]) - 1.0), -1.0, 1.0)
+    return {"rotation_deg": float(np.degrees(np.arccos(cos))),
+            "translation": float(np.linalg.norm(after.center - before.center))}
+
+
+def outline_offsets(data: MultiViewData, caster: RayCaster) -> np.ndarray:
+    """(V,) how far, in pixels, each view's alpha outline lies from the mesh's outline under
+    its camera: pixels where exactly one of (pixel centre sees the mesh, alpha >= 0.5) holds,
+    over the mesh outline's length in pixels (a disc shifted by s pixels gives about 0.64 s).
+    NaN for a view without a usable alpha (:func:`silhouette`). Correct poses give 0.01-0.3 px (edge pixels split by the
+    0.5 threshold); 0.5 degrees of jitter gives several pixels."""
+    buffers = caster.face_id_buffers([v.camera for v in data.views])
+    out = np.full(len(data.views), np.nan)
+    for k, (view, buffer) in enumerate(zip(data.views, buffers)):
+        alpha = silhouette(view)
+        if alpha is None:
+            continue
+        covered = buffer >= 0
+        padded = np.pad(covered, 1, mode="edge")   # the image border is not an outline
+        inner = (covered & padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:])
+        outline = np.count_nonzero(covered & ~inner)
+        out[k] = np.count_nonzero(covered ^ (alpha >= 0.5)) / max(outline, 1)
+    return out
+
+
+def reprojection_error(cameras: list[Camera], truth: list[Camera], points: np.ndarray) -> np.ndarray:
+    """(V,) RMS distance in pixels between where each camera and its true pose project
+    ``points`` (N, 3): how far a refined pose is from the truth, in the unit that matters
+    (a turn about the object and a shift can nearly cancel, so degrees alone say little)."""
+    return np.array([np.sqrt(np.mean(np.sum((a.project(points)[0] - b.project(points)[0]) ** 2, axis=1)))
+                     for a, b in zip(cameras, truth)])
+
+
+def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
+    """Whether ``after`` lies within :data:`POSE_MAX_DEGREES` and :data:`POSE_MAX_SHIFT` x the
+    distance to ``centre`` (3,) of ``before``."""
+    change = pose_change(before, after)
+    return (change["rotation_deg"] <= POSE_MAX_DEGREES
+            and change["translation"] <= POSE_MAX_SHIFT * np.linalg.norm(before.center - centre))
+
+
+def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate], rounds: int = POSE_ROUNDS,
+                 folds: int = PoseConfig.pose_folds, caster: RayCaster | None = None, log=None
+                 ) -> tuple[MultiViewData, list[dict]]:
+    """Every training view's camera refined, the mesh and images kept.
+
+    First each camera is moved so the silhouette matches the view's alpha. Then, ``rounds``
+    times, the views are split into ``folds`` interleaved groups; each group is aligned with
+    the image predicted by ``solve`` on the other groups, so a view is never pulled toward an
+    estimate that already holds its own misregistered pixels.
+
+    Parameters
+    ----------
+    solve : MultiViewData -> Estimate (the method that will run on the refined data).
+    caster : ray queries of ``data.mesh`` (None: built with the default variant).
+    rounds : alignment rounds (at least 1).
+    folds : view groups per round (2 to the number of views). When an estimate from the
+        other groups would hold fewer than :data:`POSE_MIN_VIEWS` views, only the
+        silhouette step runs.
+
+    A view whose correction grows beyond :func:`plausible` goes back to its silhouette-only
+    pose, or to its given pose when that too is beyond it (and is marked 'diverged'): it was
+    pulled by a poor estimate, not by its pixels. Its 'pixels' and 'cost' then describe the
+    alignment that was thrown away.
+
+    Returns
+    -------
+    data : the data with the refined cameras.
+    info : one dict per view: 'name', 'rotation_deg' and 'translation' (world units) of the
+        correction, 'c2w' (4x4 list), 'diverged' (bool), 'pixels' and 'cost' of the last
+        alignment.
+    """
+    n = len(data.views)
+    if n < 2:
+        raise InputError(f"pose refinement needs at least 2 training views (each is aligned against an estimate "
+                         f"from the others), got {n}")
+    if rounds < 1:
+        raise InputError(f"pose refinement needs at least 1 round, got {rounds}")
+    if not 2 <= folds <= n:
+        raise InputError(f"pose refinement splits the views into 2 to {n} groups (one view group is aligned "
+                         f"against an estimate from the others); got {folds}")
+    caster = caster or RayCaster(data.mesh)
+    centre = data.mesh.bounds_centre
+    centred = []
+    for v in data.views:
+        cam = centre_view(v, caster)
+        centred.append(dataclasses.replace(v, camera=cam if plausible(v.camera, cam, centre) else v.camera))
+    views, diverged = list(centred), [False] * n
+    last = [{"pixels": 0, "cost": [0.0, 0.0]}] * n
+    if n - -(-n // folds) < POSE_MIN_VIEWS:
+        rounds = 0
+        if log:
+            log(f"pose refinement: {n} views in {folds} groups leave under {POSE_MIN_VIEWS} views per held-out "
+                "estimate; only the silhouette step ran")
+    for r in range(rounds):
+        for k in range(folds):
+            held = [i for i in range(n) if i % folds == k]
+            predictor = Predictor(data.mesh, solve(dataclasses.replace(data, views=[
+                v for i, v in enumerate(views) if i % folds != k])))
+            for i in held:
+                cam, last[i] = refine_view(views[i], predictor)
+                diverged[i] = not plausible(data.views[i].camera, cam, centre)
+                views[i] = centred[i] if diverged[i] else dataclasses.replace(views[i], camera=cam)
+        if log:
+            moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
+            log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg")
+    info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), "diverged": bad,
+             **extra} for v, w, bad, extra in zip(data.views, views, diverged, last)]
+    return dataclasses.replace(data, views=views), info

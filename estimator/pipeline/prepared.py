@@ -1,0 +1,229 @@
+"""The stages every method shares: observations, shadow function, reflection matrices."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..core import sh
+from ..core.data import MultiViewData
+from ..core.errors import InputError
+from ..core.settings import Section
+from ..model.reflection import mirror_directions
+from ..model.reflection_models import ReflectionConfig, ReflectionModel, reflection_model
+from ..rays.backend import BackendConfig
+from ..rays.raycast import RayCaster
+from ..rays.visibility import SphereSampling, Visibility, VisibilityConfig, compute_visibility, sphere_sampling
+from .observations import ObservationConfig, Observations, gather_observations
+
+ROW_CHUNK = 65_536   # rows of a reflection matrix computed at once when they are streamed (~63 MB)
+
+
+@dataclass
+class StreamingConfig(Section):
+    """When the reflection rows are streamed instead of held, and how a streamed light is found.
+
+    Attributes
+    ----------
+    dense_rows : faces plus kept observations above which the reflection rows (float64, M
+        wide) are not held in memory but computed in chunks when needed (:class:`Prepared`);
+        1.5 M rows hold at most 1.4 GiB. Only methods with ``streams`` accept such a problem.
+    light_faces : a streamed per-face solve finds the light from the observations of this many
+        observed faces drawn at random (seeded), then every face's albedos with the light
+        fixed: 121 light coefficients are determined many times over by 20,000 faces.
+    """
+
+    dense_rows: int = 1_500_000
+    light_faces: int = 20_000
+
+    def check(self):
+        return [(self.dense_rows >= 1, "dense_rows must be >= 1"),
+                (self.light_faces >= 1, "light_faces must be >= 1")]
+
+
+@dataclass
+class PrepareConfig(StreamingConfig, ObservationConfig, VisibilityConfig, BackendConfig, ReflectionConfig):
+    """Every setting :func:`prepare` reads: the reflection model, the variant, the shadow
+    function's directions, the observations and the streaming threshold."""
+
+
+@dataclass
+class Prepared:
+    """Inputs of the solvers, computed once per dataset.
+
+    Attributes
+    ----------
+    model : the reflection model of ``config``.
+    all_obs : every observation (for median colours).
+    obs : observations kept for the solve (``min_cos_view`` cut).
+    c_matrix : (F, M) the model's diffuse rows of every face, or None when streamed.
+    d_rows : (N, M) the model's specular rows of ``obs``, or None when streamed. Both
+        multiply the model's light unknown (h, or L for a radiance model).
+    timings : seconds per stage.
+
+    A problem larger than ``config.dense_rows`` (faces plus kept observations) is
+    *streamed*: the rows are never held whole, and :meth:`diffuse_rows`,
+    :meth:`specular_rows`, :meth:`shading` and :meth:`gloss` compute them in chunks of
+    :data:`ROW_CHUNK`, so memory stays linear in faces and observations with small constants.
+    """
+
+    data: MultiViewData
+    config: PrepareConfig
+    model: ReflectionModel
+    caster: RayCaster
+    sampling: SphereSampling
+    visibility: Visibility
+    all_obs: Observations
+    obs: Observations
+    c_matrix: np.ndarray
+    d_rows: np.ndarray
+    timings: dict = field(default_factory=dict)
+    # the last light's projections (shading, gloss): a streamed problem's cost one full pass over
+    # the rows each, and the solve and the trust diagnostics ask for the same light
+    _projections: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def streamed(self) -> bool:
+        """True when the reflection rows are computed on demand instead of held."""
+        return self.d_rows is None
+
+    @property
+    def c_rows(self) -> np.ndarray:
+        """(N, M) diffuse matrix row of each kept observation's face (held rows only)."""
+        if self.streamed:
+            raise InputError("the reflection rows of this problem are streamed (config.dense_rows): "
+                             "use diffuse_rows/specular_rows on chunks")
+        return self.c_matrix[self.obs.face]
+
+    def diffuse_rows(self, faces: np.ndarray) -> np.ndarray:
+        """(n, M) diffuse rows C_i of the faces (n,)."""
+        if not self.streamed:
+            return self.c_matrix[faces]
+        return self.model.diffuse_matrix(self.data.mesh, self.sampling, self.visibility, faces)
+
+    def specular_rows(self, rows: np.ndarray) -> np.ndarray:
+        """(n, M) specular rows D_k of the kept observations ``rows`` (n,) (indices into ``obs``)."""
+        if not self.streamed:
+            return self.d_rows[rows]
+        face = self.obs.face[rows]
+        mirror = mirror_directions(self.data.mesh.face_normals[face], self.obs.view_dir[rows])
+        return self.model.specular_rows(face, mirror, self.sampling, self.visibility)
+
+    def shading(self, light: np.ndarray) -> np.ndarray:
+        """(F, C) C_i . x of every face under the light unknown ``light`` (M, C)."""
+        if not self.streamed:
+            return self.c_matrix @ light
+        return self._projection("shading", light, self.data.mesh.num_faces,
+                                lambda part: self.diffuse_rows(part) @ light)
+
+    def gloss(self, light: np.ndarray) -> np.ndarray:
+        """(N, C) D_k . x of every kept observation under the light unknown ``light`` (M, C)."""
+        if not self.streamed:
+            return self.d_rows @ light
+        return self._projection("gloss", light, len(self.obs.face), lambda part: self.specular_rows(part) @ light)
+
+    def _projection(self, kind: str, light: np.ndarray, count: int, rows_times_light) -> np.ndarray:
+        """A streamed projection, in chunks of :data:`ROW_CHUNK` rows; the last light's is kept."""
+        key = (light.shape, light.tobytes())
+        cached = self._projections.get(kind)
+        if cached is None or cached[0] != key:
+            value = np.concatenate([rows_times_light(np.arange(s, min(s + ROW_CHUNK, count)))
+                                    for s in range(0, count, ROW_CHUNK)])
+            self._projections[kind] = cached = (key, value)
+        return cached[1]
+
+    def face_subset(self, faces: np.ndarray) -> "Prepared":
+        """The problem restricted to ``faces`` (S,) (sorted, unique), renumbered 0..S-1,
+        with its rows held: a light solved on it is a light of the whole problem."""
+        mapping = np.full(self.obs.num_faces, -1, dtype=np.int64)
+        mapping[faces] = np.arange(len(faces))
+        keep = mapping[self.obs.face] >= 0
+        sub = self.obs.subset(keep)
+        return replace(self, obs=replace(sub, face=mapping[sub.face], num_faces=len(faces)),
+                       c_matrix=self.diffuse_rows(faces), d_rows=self.specular_rows(np.nonzero(keep)[0]),
+                       timings=dict(self.timings))
+
+    def projected(self, light: np.ndarray) -> "Prepared":
+        """The same observations with the light fixed to ``light`` (M, 3): each row becomes
+        its three per-channel projections (C_i . x, D_k . x), so a solve with the light
+        fixed to the identity (3, 3) gives the albedos under ``light`` in O(N) memory."""
+        return replace(self, c_matrix=self.shading(light), d_rows=self.gloss(light), timings=dict(self.timings))
+
+
+def _model_matrices(data: MultiViewData, model: ReflectionModel, sampling: SphereSampling,
+                    visibility: Visibility, obs: Observations) -> tuple[np.ndarray | None, np.ndarray | None]:
+    if streams(data, model.config, obs):
+        return None, None
+    c_matrix = model.diffuse_matrix(data.mesh, sampling, visibility)
+    mirror = mirror_directions(data.mesh.face_normals[obs.face], obs.view_dir)
+    return c_matrix, model.specular_rows(obs.face, mirror, sampling, visibility)
+
+
+def streams(data: MultiViewData, config: PrepareConfig, obs: Observations) -> bool:
+    """Whether a problem's reflection rows are streamed: faces plus kept observations
+    exceed ``config.dense_rows``."""
+    return data.mesh.num_faces + len(obs.face) > config.dense_rows
+
+
+def with_config(prep: Prepared, config: PrepareConfig) -> Prepared:
+    """The same observations and shadow function under another model configuration
+    (e.g. another Phong exponent): only the reflection matrices are recomputed."""
+    for key in ("directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "negative_tolerance",
+                "variant"):
+        if getattr(config, key) != getattr(prep.config, key):
+            raise InputError(f"with_config cannot change {key}; run prepare() again")
+    t = time.perf_counter()
+    model = reflection_model(config)
+    c_matrix, d_rows = _model_matrices(prep.data, model, prep.sampling, prep.visibility, prep.obs)
+    timings = {**prep.timings, "reflection": time.perf_counter() - t}
+    return Prepared(prep.data, config, model, prep.caster, prep.sampling, prep.visibility, prep.all_obs, prep.obs,
+                    c_matrix, d_rows, timings)
+
+
+def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | None = None,
+            streaming: bool = True, caster: RayCaster | None = None) -> Prepared:
+    """Run the shared stages. ``log`` (optional callable) receives progress lines;
+    ``caster``: ray queries of ``data.mesh`` already built (None: built here).
+
+    ``streaming`` False (a method that needs the rows held) refuses, before the shadow
+    function is computed, a problem larger than ``config.dense_rows``; ``method`` names it
+    in the message.
+    """
+    say = log or (lambda message: None)
+    timings = {}
+    t = time.perf_counter()
+    caster = caster or RayCaster(data.mesh, config.variant)
+    all_obs = gather_observations(caster, data.views, config.min_pixels, config.min_coverage, config.pure_pixels,
+                                  config.negative_tolerance)
+    normals = data.mesh.face_normals
+    cos_view = np.sum(normals[all_obs.face] * all_obs.view_dir, axis=1)
+    obs = all_obs.subset(cos_view > config.min_cos_view)
+    if len(obs.face) == 0:
+        raise InputError(f"no observation passes min_cos_view={config.min_cos_view}")
+    timings["observations"] = time.perf_counter() - t
+    say(f"observations: {len(all_obs.face)} (face, view) pairs, {len(obs.face)} kept "
+        f"(view within acos({config.min_cos_view}) of the normal)")
+    if streams(data, config, obs):
+        if not streaming:
+            raise InputError(
+                f"method {method!r} holds its reflection rows in memory, and this problem has "
+                f"{data.mesh.num_faces} faces + {len(obs.face)} observations > dense_rows="
+                f"{config.dense_rows} (at most {config.dense_rows * sh.num_coeffs(config.sh_order) * 8 / 2**30:.1f}"
+                " GiB of rows): use bilinear-per-face, known-illumination or median-color, which "
+                "stream them, or raise dense_rows"
+            )
+        say(f"streamed rows: {data.mesh.num_faces} faces + {len(obs.face)} observations > dense_rows "
+            f"{config.dense_rows}")
+
+    t = time.perf_counter()
+    sampling = sphere_sampling(config.directions)
+    visibility = compute_visibility(caster, sampling)
+    timings["visibility"] = time.perf_counter() - t
+    say(f"visibility: {data.mesh.num_faces} faces x {config.directions} directions")
+
+    t = time.perf_counter()
+    model = reflection_model(config)
+    c_matrix, d_rows = _model_matrices(data, model, sampling, visibility, obs)
+    timings["reflection"] = time.perf_counter() - t
+    return Prepared(data, config, model, caster, sampling, visibility, all_obs, obs, c_matrix, d_rows, timings)

@@ -1,0 +1,128 @@
+"""Mitsuba ray queries on a TriangleMesh: first hits and face-ID buffers (the shadow
+function traces its rays in one Dr.Jit kernel, see :mod:`estimator.rays.visibility`).
+
+All queries are batched Dr.Jit calls over many rays; nothing loops over rays in Python.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.camera import Camera
+from ..core.data import TriangleMesh
+from . import backend
+
+
+def mitsuba_mesh(mesh: TriangleMesh, name: str = "mesh", props=None):
+    """A ``mi.Mesh`` with the vertices and faces of ``mesh`` in its face order.
+
+    No vertex normals: Mitsuba shades with the geometric (flat) face normals.
+    ``props`` is an optional ``mi.Properties`` (to attach a BSDF).
+    """
+    mi = backend.set_variant()
+    args = (name, mesh.vertices.shape[0], mesh.num_faces)
+    m = mi.Mesh(*args, has_vertex_normals=False, has_vertex_texcoords=False,
+                props=props) if props is not None else mi.Mesh(*args, has_vertex_normals=False)
+    params = mi.traverse(m)
+    params["vertex_positions"] = mi.Float(mesh.vertices.astype(np.float32).ravel())
+    params["faces"] = mi.UInt32(mesh.faces.astype(np.uint32).ravel())
+    params.update()
+    return m
+
+
+class RayCaster:
+    """A Mitsuba scene holding one mesh (robust intersections), for batched ray queries.
+
+    Parameters
+    ----------
+    mesh : TriangleMesh
+    variant : optional Mitsuba variant (see :mod:`estimator.rays.backend`).
+    """
+
+    def __init__(self, mesh: TriangleMesh, variant: str | None = None):
+        self.mi = backend.set_variant(variant)
+        self.mesh = mesh
+        self.scene = self.mi.load_dict({
+            "type": "scene",
+            "embree_use_robust_intersections": True,
+            "mesh": mitsuba_mesh(mesh),
+        })
+        self.scale = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+
+    def _rays(self, origins: np.ndarray, directions: np.ndarray, tmax: float | None = None):
+        mi = self.mi
+        o = mi.Point3f(*(np.ascontiguousarray(origins[:, i], dtype=np.float32) for i in range(3)))
+        d = mi.Vector3f(*(np.ascontiguousarray(directions[:, i], dtype=np.float32) for i in range(3)))
+        ray = mi.Ray3f(o, d)
+        if tmax is not None:
+            ray.maxt = tmax
+        return ray
+
+    def first_hit_faces(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Index of the first face hit by each ray, -1 on a miss.
+
+        Parameters
+        ----------
+        origins, directions : (N, 3)
+
+        Returns
+        -------
+        (N,) int64
+        """
+        if len(origins) == 0:
+            return np.zeros(0, dtype=np.int64)
+        pi = self.scene.ray_intersect_preliminary(self._rays(origins, directions))
+        hit = np.asarray(pi.is_valid(), dtype=bool)
+        prim = np.asarray(pi.prim_index, dtype=np.int64)
+        return np.where(hit, prim, -1)
+
+    def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(face (N,) int64 with -1 on a miss, distance t (N,) float64, inf on a miss)."""
+        if len(origins) == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        pi = self.scene.ray_intersect_preliminary(self._rays(origins, directions))
+        hit = np.asarray(pi.is_valid(), dtype=bool)
+        return (np.where(hit, np.asarray(pi.prim_index, dtype=np.int64), -1),
+                np.where(hit, np.asarray(pi.t, dtype=np.float64), np.inf))
+
+    def face_id_buffer(self, camera: Camera) -> np.ndarray:
+        """(H, W) int64 face seen through each pixel centre, -1 for background."""
+        return self.face_id_buffers([camera], pure=False)[0]
+
+    def face_id_buffers(self, cameras: list[Camera], pure: bool = False,
+                        max_rays: int = 4_000_000) -> list[np.ndarray]:
+        """Face-ID buffers of many cameras, traced in batches of up to ``max_rays`` rays.
+
+        With ``pure=True`` a pixel keeps its face only when the rays through its
+        four corners hit that same face (-1 otherwise): such pixels are covered by
+        one face alone, so their colour is that face's even in antialiased images.
+
+        Returns
+        -------
+        list of (H, W) int64 arrays, -1 for background (or impure pixels).
+        """
+        grids = []
+        for cam in cameras:
+            grids.append(cam)
+            if pure:  # an (H+1) x (W+1) grid of rays through the pixel corners
+                grids.append(Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5,
+                                    cam.width + 1, cam.height + 1))
+        buffers: list[np.ndarray] = []
+        batch: list[Camera] = []
+        for grid in grids + [None]:
+            size = sum(g.width * g.height for g in batch)
+            if grid is None or (batch and size + grid.width * grid.height > max_rays):
+                rays = [g.pixel_rays() for g in batch]
+                ids = self.first_hit_faces(np.concatenate([o for o, _ in rays]), np.concatenate([d for _, d in rays]))
+                parts = np.split(ids, np.cumsum([g.width * g.height for g in batch])[:-1])
+                buffers += [b.reshape(g.height, g.width) for b, g in zip(parts, batch)]
+                batch = []
+            if grid is not None:
+                batch.append(grid)
+        if not pure:
+            return buffers
+        out = []
+        for centre, corners in zip(buffers[0::2], buffers[1::2]):
+            same = ((corners[:-1, :-1] == centre) & (corners[1:, :-1] == centre)
+                    & (corners[:-1, 1:] == centre) & (corners[1:, 1:] == centre))
+            out.append(np.where(same, centre, -1))
+        return out

@@ -1,0 +1,255 @@
+"""Alternating least squares for the bilinear system of Eq. 17."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import sparse
+
+from ..core.errors import InputError
+from ..core.gauge import unit_dc
+from ..core.settings import Section
+
+COMPONENTS = ("both", "specular", "diffuse")
+
+
+@dataclass
+class BilinearConfig(Section):
+    """The bilinear solve (:func:`solve_bilinear`).
+
+    Attributes
+    ----------
+    iterations, tol : ALS iteration cap and relative residual-change stop.
+    components : 'both', 'specular' (t_d = 0, the earth experiment) or 'diffuse'.
+    lm_damping_start, lm_damping_raise, lm_damping_lower, lm_damping_max : the
+        Levenberg-Marquardt schedule: initial damping, factor on a rejected step, divisor
+        after an accepted one, and the damping at which a step is given up (Madsen, Nielsen
+        & Tingleff's usual values; raising by more than lowering keeps the solver from
+        oscillating between the two).
+    """
+
+    iterations: int = 20
+    tol: float = 1e-6
+    components: str = "both"
+    lm_damping_start: float = 1e-3
+    lm_damping_raise: float = 4.0
+    lm_damping_lower: float = 3.0
+    lm_damping_max: float = 1e8
+
+    def check(self):
+        return [
+            (self.iterations >= 1, "iterations must be >= 1"),
+            (self.tol >= 0, "tol must be >= 0"),
+            (self.components in COMPONENTS, f"components must be one of {COMPONENTS}"),
+            (self.lm_damping_start > 0 and self.lm_damping_max > self.lm_damping_start,
+             "lm_damping_start must be > 0 and below lm_damping_max"),
+            (self.lm_damping_raise > 1 and self.lm_damping_lower > 1,
+             "lm_damping_raise and lm_damping_lower must be > 1"),
+        ]
+
+    @property
+    def lm_schedule(self) -> tuple[float, float, float, float]:
+        """(start, raise, lower, max) damping of the Levenberg-Marquardt solve."""
+        return self.lm_damping_start, self.lm_damping_raise, self.lm_damping_lower, self.lm_damping_max
+
+
+LM_SCHEDULE = BilinearConfig().lm_schedule
+
+
+@dataclass
+class BilinearResult:
+    """Solution of the bilinear system.
+
+    Attributes
+    ----------
+    diffuse, specular : (G, 3) albedo of each group.
+    light : (M, 3) the light unknown of the reflection model (pseudo illumination h or
+        radiance L), DC coefficient 1 per channel (the scale gauge).
+    residuals : relative residual ||R - model|| / ||R|| after each ALS step, then after LM.
+    lm_residuals : per channel, the channel's relative residual after each accepted LM step.
+    weights : (N,) the observations' weights in the final solve (set by robust callers).
+    """
+
+    diffuse: np.ndarray
+    specular: np.ndarray
+    light: np.ndarray
+    residuals: list[float] = field(default_factory=list)
+    lm_residuals: list[list[float]] = field(default_factory=list)
+    weights: np.ndarray | None = None
+
+
+def _solve_albedos(r, a, b, group, num_groups, components, ridge=1e-12):
+    """Per group: min sum (r - td a - ts b)^2 with td, ts >= 0 (2x2 active set). r, a, b: (N,)."""
+    def s(w):
+        return np.bincount(group, w, minlength=num_groups)
+
+    saa, sbb, sab, sra, srb = s(a * a), s(b * b), s(a * b), s(r * a), s(r * b)
+    td_only = sra / np.maximum(saa, ridge)
+    ts_only = srb / np.maximum(sbb, ridge)
+    if components == "diffuse":
+        return np.maximum(td_only, 0), np.zeros(num_groups)
+    if components == "specular":
+        return np.zeros(num_groups), np.maximum(ts_only, 0)
+    det = saa * sbb - sab * sab
+    scale = np.maximum(saa * sbb, ridge)
+    ok = det > 1e-10 * scale
+    safe = np.where(ok, det, 1.0)
+    td = np.where(ok, (sra * sbb - srb * sab) / safe, td_only)
+    ts = np.where(ok, (srb * saa - sra * sab) / safe, 0.0)
+    # active set: a negative albedo is fixed at 0 and the other re-solved
+    neg_d, neg_s = td < 0, ts < 0
+    td, ts = np.where(neg_d, 0.0, td), np.where(neg_d, ts_only, ts)
+    td, ts = np.where(neg_s & ~neg_d, td_only, td), np.where(neg_s & ~neg_d, 0.0, ts)
+    return np.maximum(td, 0), np.maximum(ts, 0)
+
+
+def _features(components: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, P) columns multiplying the unknown albedos of each row."""
+    return {"both": np.stack([a, b], 1), "specular": b[:, None], "diffuse": a[:, None]}[components]
+
+
+def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterations, tol, residuals, norm,
+                schedule=LM_SCHEDULE):
+    """Levenberg-Marquardt on one channel, albedos eliminated by their Schur complement.
+
+    alb : (G, P) albedos of the unknown components; h : (M,) light. ``schedule``: (start,
+    raise, lower, max) damping. Returns refined (alb, h).
+    """
+    lam, lam_raise, lam_lower, lam_max = schedule
+    indicator = sparse.csr_matrix((np.ones(len(group)), (group, np.arange(len(group)))),
+                                  shape=(num_groups, len(group)))
+
+    def model(alb_, h_):
+        feats = _features(components, c_rows @ h_, d_rows @ h_)
+        return feats, np.sum(alb_[group] * feats, axis=1)
+
+    def light_jacobian(alb_):
+        if components == "both":
+            return alb_[group, 0, None] * c_rows + alb_[group, 1, None] * d_rows
+        return alb_[group, 0, None] * (d_rows if components == "specular" else c_rows)
+
+    feats, pred = model(alb, h)
+    cost = float(np.sum((r - pred) ** 2))
+    m, p = len(h), alb.shape[1]
+    for _ in range(iterations):
+        e = r - pred
+        jac = light_jacobian(alb)                                              # (N, M)
+        u = np.stack([np.stack([np.bincount(group, feats[:, i] * feats[:, j], minlength=num_groups)
+                                for j in range(p)], -1) for i in range(p)], -2)  # (G, P, P)
+        g_alb = np.stack([np.bincount(group, feats[:, i] * e, minlength=num_groups) for i in range(p)], -1)
+        w = np.stack([indicator @ (feats[:, i, None] * jac) for i in range(p)], 1)  # (G, P, M)
+        v = jac.T @ jac
+        g_h = jac.T @ e
+        while True:
+            u_d = u + lam * (u * np.eye(p)) + 1e-12 * np.eye(p)
+            v_d = v + lam * np.diag(np.diag(v)) + 1e-12 * np.trace(v) / m * np.eye(m)
+            u_inv = np.linalg.inv(u_d)
+            u_inv_w = u_inv @ w                                                # (G, P, M)
+            schur = v_d - np.einsum("gpm,gpn->mn", w, u_inv_w)
+            rhs = g_h - np.einsum("gpm,gp->m", w, np.einsum("gpq,gq->gp", u_inv, g_alb))
+            dh = np.linalg.solve(schur, rhs)
+            dalb = np.einsum("gpq,gq->gp", u_inv, g_alb - w @ dh)
+            alb_new, h_new = np.maximum(alb + dalb, 0.0), h + dh
+            feats_new, pred_new = model(alb_new, h_new)
+            cost_new = float(np.sum((r - pred_new) ** 2))
+            if cost_new < cost or lam > lam_max:
+                break
+            lam *= lam_raise
+        if cost_new >= cost:
+            break
+        improvement = (cost - cost_new) / max(cost, 1e-300)
+        alb, h, feats, pred, cost = alb_new, h_new, feats_new, pred_new, cost_new
+        lam = max(lam / lam_lower, 1e-9)
+        residuals.append(np.sqrt(cost) / norm)
+        if improvement < tol:
+            break
+    return alb, h
+
+
+def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_rows: np.ndarray,
+                   num_groups: int, components: str = "both", iterations: int = 20, tol: float = 1e-6,
+                   fixed_light: np.ndarray | None = None, ridge: float = 1e-9,
+                   als_iterations: int = 5, schedule: tuple[float, float, float, float] = LM_SCHEDULE,
+                   initial_light: np.ndarray | None = None) -> BilinearResult:
+    """Solve the bilinear system: alternating least squares, then Levenberg-Marquardt.
+
+    The model of observation k (face i in group g, one colour channel) is
+    R_k = t_d[g] (C_i . h) + t_s[g] (D_k . h). ALS (albedos of every group with
+    the light fixed, then the light with the albedos fixed) gives a start;
+    plain ALS converges slowly on this problem, so Levenberg-Marquardt steps
+    on all unknowns follow, with the per-group albedos eliminated by their
+    Schur complement (an M x M system per step). Albedos stay >= 0. Each
+    channel is solved independently; the gauge is unit DC of h per channel.
+
+    Parameters
+    ----------
+    rgb : (N, 3) observed colours.
+    group : (N,) group (cluster) of each observation's face, in [0, G).
+    c_rows : (N, M) diffuse matrix row of each observation's face (C_i).
+    d_rows : (N, M) mirror matrix rows (D_k).
+    components : 'both', 'specular' (t_d = 0) or 'diffuse' (t_s = 0).
+    iterations : cap on the Levenberg-Marquardt steps.
+    tol : stop when the squared residual improves by less than this fraction.
+    fixed_light : (M, 3) known light: only albedos are solved.
+    ridge : Tikhonov weight of the ALS light step, relative to the mean diagonal.
+    als_iterations : ALS steps before Levenberg-Marquardt.
+    schedule : Levenberg-Marquardt damping (start, raise, lower, max).
+    initial_light : (M, 3) start of the light (a previous solve's): one ALS step replaces
+        ``als_iterations`` before Levenberg-Marquardt.
+
+    Returns
+    -------
+    BilinearResult with the residual after every step (ALS, then LM).
+    """
+    if components not in COMPONENTS:
+        raise InputError(f"components must be one of {COMPONENTS}, got {components!r}")
+    n, m = c_rows.shape
+    if rgb.shape != (n, 3) or d_rows.shape != (n, m) or group.shape != (n,):
+        raise InputError("solve_bilinear: rgb (N, 3), group (N,), c_rows and d_rows (N, M) must agree")
+    h = np.zeros((m, 3))
+    h[0] = 1.0
+    if fixed_light is not None:
+        h = np.array(fixed_light, dtype=np.float64)
+    elif initial_light is not None:
+        if initial_light.shape != (m, 3):
+            raise InputError(f"solve_bilinear: initial_light must be ({m}, 3), got {initial_light.shape}")
+        h = np.array(initial_light, dtype=np.float64)
+        als_iterations = 1
+    td, ts = np.zeros((num_groups, 3)), np.zeros((num_groups, 3))
+    norm = max(float(np.linalg.norm(rgb)), 1e-300)
+    residuals: list[float] = []
+
+    def relative_residual():
+        pred = td[group] * (c_rows @ h) + ts[group] * (d_rows @ h)
+        return float(np.linalg.norm(rgb - pred) / norm)
+
+    for _ in range(1 if fixed_light is not None else als_iterations):
+        for ch in range(3):
+            td[:, ch], ts[:, ch] = _solve_albedos(rgb[:, ch], c_rows @ h[:, ch], d_rows @ h[:, ch],
+                                                  group, num_groups, components)
+        if fixed_light is None:
+            for ch in range(3):
+                rows = td[group, ch, None] * c_rows + ts[group, ch, None] * d_rows
+                gram = rows.T @ rows
+                gram[np.diag_indices(m)] += ridge * np.trace(gram) / m
+                h[:, ch] = np.linalg.solve(gram, rows.T @ rgb[:, ch])
+        residuals.append(relative_residual())
+    if fixed_light is None and iterations > 0:
+        lm_residuals = [[] for _ in range(3)]
+        for ch in range(3):
+            alb = {"both": np.stack([td[:, ch], ts[:, ch]], 1), "specular": ts[:, ch, None],
+                   "diffuse": td[:, ch, None]}[components]
+            alb, h[:, ch] = _lm_channel(rgb[:, ch], group, num_groups, c_rows, d_rows, alb, h[:, ch],
+                                        components, iterations, tol, lm_residuals[ch], norm, schedule)
+            if components == "both":
+                td[:, ch], ts[:, ch] = alb[:, 0], alb[:, 1]
+            elif components == "specular":
+                ts[:, ch] = alb[:, 0]
+            else:
+                td[:, ch] = alb[:, 0]
+        # the gauge: unit DC per channel, albedos absorb the scale
+        h, dc = unit_dc(h)
+        td, ts = td * dc, ts * dc
+        residuals.append(relative_residual())
+        return BilinearResult(td, ts, h, residuals, lm_residuals)
+    return BilinearResult(td, ts, h, residuals)

@@ -1,0 +1,121 @@
+"""Uniform-albedo regions on the mesh: per-face diffuse radiance, albedo features and
+graph segmentation (used by the ``bilinear-segmented`` method).
+
+Neighbouring faces receive nearly the same light, so where their shading-corrected
+albedos agree they belong to one region (a Retinex edge cue), whatever the hue.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
+
+from ..core.reductions import group_quantile
+from ..core.settings import Section
+from .clustering import mean_shift
+
+
+@dataclass
+class SegmentationConfig(Section):
+    """Uniform regions on the face-adjacency graph (:func:`segment`).
+
+    Attributes
+    ----------
+    segment_threshold : neighbours whose log-albedos differ by less than this join one region.
+    uniform_spread : a region is uniform (its faces share one albedo) when its log-albedo
+        spread is below this.
+    """
+
+    segment_threshold: float = 0.12
+    uniform_spread: float = 0.08
+
+    def check(self):
+        return [(self.segment_threshold > 0 and self.uniform_spread > 0,
+                 "segment_threshold and uniform_spread must be > 0")]
+
+
+def albedo_features(albedo: np.ndarray) -> np.ndarray:
+    """(F, 4) features in which a distance is a relative albedo difference whatever the
+    colour: log brightness (mean over channels) and half the chromaticity (albedo /
+    brightness). Per-channel logs are not used: a channel near zero (the blue of a
+    yellow) would turn noise into large differences."""
+    level = np.maximum(albedo.mean(axis=1), 1e-30)
+    return np.column_stack([np.log(level), 0.5 * albedo / level[:, None]])
+
+
+def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
+            threshold: float = SegmentationConfig.segment_threshold,
+            uniform_spread: float = SegmentationConfig.uniform_spread, min_size: int = 10, merge_bandwidth: float = 0.12
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Uniform-albedo regions on the face-adjacency graph.
+
+    Neighbours whose :func:`albedo_features` differ by less than ``threshold`` (largest
+    component) are joined (connected components). A component of at least ``min_size``
+    faces whose feature spread (median absolute deviation, largest component) is below
+    ``uniform_spread`` is uniform; uniform components with similar albedo (mean shift,
+    ``merge_bandwidth``) are one region even when apart.
+
+    Returns
+    -------
+    labels : (F,) int64 region of each valid face in a uniform region, else -1.
+    medians : (R, C) median albedo of each region.
+    """
+    f = len(albedo)
+    feat = albedo_features(np.where(valid[:, None], albedo, 1.0))
+    e0, e1 = edges[:, 0], edges[:, 1]
+    close = valid[e0] & valid[e1] & (np.max(np.abs(feat[e0] - feat[e1]), axis=1) < threshold)
+    graph = sparse.csr_matrix((np.ones(close.sum()), (e0[close], e1[close])), shape=(f, f))
+    _, comp = connected_components(graph, directed=False)
+    ids, inverse, counts = np.unique(comp[valid], return_inverse=True, return_counts=True)
+    values = feat[valid]
+    medians = group_quantile(inverse, values, len(ids), 0.5, interpolate=True)
+    spreads = group_quantile(inverse, np.abs(values - medians[inverse]), len(ids), 0.5, interpolate=True).max(axis=1)
+    uniform = (counts >= min_size) & (spreads < uniform_spread)
+    labels = np.full(f, -1, dtype=np.int64)
+    if not uniform.any():
+        return labels, np.zeros((0, albedo.shape[1]))
+    merged, _ = mean_shift(medians[uniform], merge_bandwidth, metric="euclidean")
+    region_of_component = np.full(len(ids), -1)
+    region_of_component[np.nonzero(uniform)[0]] = merged
+    labels[valid] = region_of_component[inverse]
+    present, compact = np.unique(labels[labels >= 0], return_inverse=True)
+    labels[labels >= 0] = compact
+    inside = labels >= 0
+    return labels, group_quantile(labels[inside], albedo[inside], len(present), 0.5, interpolate=True)
+
+
+def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, edges: np.ndarray,
+            reach: float) -> np.ndarray:
+    """Groups: the uniform regions; a face outside them joins the region whose albedo
+    features are within ``reach`` of its own (shading noise in dim faces), or, when its
+    albedo is unknown (no light) or 90 % of the faces are in regions already, the region
+    most of its neighbours joined; any other face is a group of its own (texture)."""
+    group = labels.copy()
+    regions = int(group.max()) + 1
+    if regions:
+        finite = np.all(np.isfinite(albedo) & (albedo > 0), axis=1)
+        feat = albedo_features(np.where(finite[:, None], albedo, 1.0))
+        centres = group_quantile(group[group >= 0], feat[group >= 0], regions, 0.5, interpolate=True)
+        dist = np.max(np.abs(feat[:, None, :] - centres[None]), axis=2)
+        near = (group < 0) & seen & finite & (dist.min(axis=1) < reach)
+        group[near] = np.argmin(dist[near], axis=1)
+        # in a piecewise-uniform object (nearly every face in a region) the rest are faces
+        # the shading model fails on (concavities, silhouettes): they follow their neighbours
+        piecewise = np.mean(group[seen] >= 0) >= 0.9
+        for _ in range(8):  # faces without a usable albedo follow their neighbours
+            todo = (group < 0) & seen & (~finite | piecewise)
+            if not todo.any():
+                break
+            votes = np.zeros((len(group), regions))
+            for src, dst in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
+                ok = todo[src] & (group[dst] >= 0)
+                np.add.at(votes, (src[ok], group[dst[ok]]), 1.0)
+            decided = todo & (votes.max(axis=1) > 0)
+            group[decided] = np.argmax(votes[decided], axis=1)
+    free = np.nonzero((group < 0) & seen)[0]
+    group[free] = regions + np.arange(len(free))
+    group[~seen] = 0
+    _, compact = np.unique(group, return_inverse=True)
+    return compact.astype(np.int64)

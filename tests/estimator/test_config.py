@@ -1,0 +1,69 @@
+"""The configuration: its flat names (the wire format) pinned, each owned by one section beside
+its code, and every bad value refused with the setting named."""
+from __future__ import annotations
+
+from dataclasses import fields
+
+import pytest
+
+from estimator import EstimatorConfig, InputError
+from estimator.config import SECTIONS
+
+# the wire format of scene TOML files, suites, run.json and the command line: a change here is
+# a change of format, made on purpose
+WIRE_NAMES = (
+    "sh_order", "diffuse_light", "defilter_order", "phong_exponent", "specular_model", "variant",
+    "directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "negative_tolerance",
+    "dense_rows", "light_faces", "iterations", "tol", "components", "lm_damping_start", "lm_damping_raise",
+    "lm_damping_lower", "lm_damping_max", "robust_loss", "robust_rounds", "glint_ratio", "segment_threshold",
+    "uniform_spread", "albedo_prior", "retinex_quantile", "retinex_ridge", "retinex_iterations",
+    "sun_min_gain", "coat_correction", "coat_ior", "coat_order", "coat_min_share", "coat_max_negative",
+    "reflected_light", "reflected_regions", "reflected_min_explained", "reflected_sun_max_ratio",
+    "reflected_sun_max_angle", "reflected_diffuse_min_explained", "reflected_lobe", "interreflection",
+    "min_brightness", "bandwidth", "split_bandwidth", "min_cluster_fraction", "recluster_rounds",
+    "recluster_min_shading", "recluster_shading_percentile", "diffuse_quantile", "segment_min_shading",
+    "tie_regions", "relabel_rounds", "relabel_free_ratio", "retinex_min_uniform_share",
+    "region_max_deviation", "region_max_drift", "ad_time_budget", "ad_resolution", "ad_spp",
+    "ad_learning_rate", "ad_envmap_height", "ad_specular", "pose_rounds", "pose_folds", "auto_pose",
+)
+
+
+def test_the_flat_names_and_their_order_are_the_wire_format():
+    assert tuple(f.name for f in fields(EstimatorConfig)) == WIRE_NAMES
+    assert tuple(EstimatorConfig().to_dict()) == WIRE_NAMES
+
+
+def test_every_setting_has_one_section_and_one_default():
+    owners = {}
+    for section in SECTIONS:
+        for name in section.__dict__.get("__annotations__", {}):
+            assert name not in owners, f"{name} is declared by {owners[name]} and {section.__name__}"
+            owners[name] = section.__name__
+    assert set(owners) == set(WIRE_NAMES)
+    config = EstimatorConfig()
+    for section in SECTIONS:   # a section alone builds with the same defaults
+        alone = section()
+        for f in fields(alone):
+            assert getattr(alone, f.name) == getattr(config, f.name)
+
+
+@pytest.mark.parametrize("settings, named", [
+    ({"sh_order": 31}, "sh_order"),
+    ({"defilter_order": 5, "sh_order": 3}, "defilter_order"),
+    ({"tol": float("nan")}, "tol"),
+    ({"variant": 3}, "variant"),
+    ({"pure_pixels": 1}, "pure_pixels"),
+    ({"robust_loss": "l1"}, "robust_loss"),
+    ({"coat_ior": 1.0}, "coat_ior"),
+    ({"pose_folds": 1}, "pose_folds"),
+    ({"ad_spp": 0}, "ad_spp"),
+    ({"diffuse_light": "defiltered", "phong_exponent": 1e-9}, "defilter_order"),
+])
+def test_a_bad_value_is_refused_naming_the_setting(settings, named):
+    with pytest.raises(InputError, match=named):
+        EstimatorConfig(**settings)
+
+
+def test_an_int_is_taken_for_a_float_and_stored_as_float():
+    config = EstimatorConfig(phong_exponent=20)
+    assert config.phong_exponent == 20.0 and isinstance(config.phong_exponent, float)

@@ -1,0 +1,62 @@
+"""Every registered method on the same micro scene (as Mitsuba's tests run every integrator):
+the result's type and shapes, finite values, the ``info`` keys that :func:`estimator.estimate`
+and the reports rely on, and the Phong exponent's selection by the methods' residuals."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator import REGISTRY, Estimate, InputError, estimate, sh
+
+from .micro import ORDER, micro_config, micro_scene
+
+# mitsuba-ad runs for a wall-clock budget: its shapes are checked here, not how far it got
+SETTINGS = {"mitsuba-ad": {"ad_time_budget": 1.0, "ad_resolution": 8, "ad_envmap_height": 4}}
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return micro_scene()
+
+
+def _known(method, truth):
+    if not REGISTRY[method].needs_illumination:
+        return {}
+    return {"known_sh": truth.pseudo_sh, "known_radiance": truth.radiance_sh}
+
+
+@pytest.mark.parametrize("method", sorted(REGISTRY))
+def test_every_method_keeps_the_contract(scene, method):
+    data, truth = scene
+    est = estimate(data, method, micro_config(**SETTINGS.get(method, {})), **_known(method, truth))
+    f, m = data.mesh.num_faces, sh.num_coeffs(ORDER)
+    assert isinstance(est, Estimate) and est.method == method
+    assert est.diffuse.shape == est.specular.shape == (f, 3)
+    assert est.pseudo_sh.shape == (m, 3)
+    assert est.labels.shape == (f,) and est.labels.dtype == np.int64
+    assert est.observed.shape == (f,) and est.observed.dtype == bool and est.observed.any()
+    assert np.all(est.labels[~est.observed] == -1)
+    for name in ("diffuse", "specular", "pseudo_sh"):
+        assert np.all(np.isfinite(getattr(est, name))), name
+    np.testing.assert_allclose(est.pseudo_sh[0], 1.0, rtol=1e-12)   # the unit-DC gauge
+    for key in ("timings", "trust", "warnings", "observations", "unobserved_share", "clusters"):
+        assert key in est.info, key
+    if REGISTRY[method].reports_residual:
+        residuals = est.info["residuals"]
+        assert len(residuals) >= 1 and all(np.isfinite(r) and r >= 0 for r in residuals)
+
+
+@pytest.mark.parametrize("method", sorted(REGISTRY))
+def test_exponent_selection_follows_the_contract(scene, method):
+    data, truth = scene
+    config = micro_config(specular_model="lobe", **SETTINGS.get(method, {}))
+    run = lambda: estimate(data, method, config, **_known(method, truth), exponent_candidates=(5.0, 10.0))  # noqa: E731
+    if not REGISTRY[method].reports_residual:
+        with pytest.raises(InputError, match=f"{method} reports none"):
+            run()
+        return
+    est = run()
+    assert set(est.info["exponent_selection"]) == {"5.0", "10.0"}
+    assert est.config.phong_exponent in (5.0, 10.0)
+    chosen = est.info["exponent_selection"][str(est.config.phong_exponent)]
+    assert chosen == min(est.info["exponent_selection"].values())

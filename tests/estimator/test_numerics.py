@@ -1,0 +1,48 @@
+"""The shared numerics: the unit-DC gauge, the edge-cost ratio and PSNR."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator import PSNR_CAP_DB, psnr_db, unit_dc
+from estimator.light.edge_fit import edge_cost_ratio
+
+
+def test_unit_dc_gives_dc_one_and_keeps_the_product():
+    rng = np.random.default_rng(1)
+    light = rng.normal(size=(9, 3))
+    light[0] = [2.0, -0.5, 4.0]
+    albedo = rng.random((5, 3))
+    unit, dc = unit_dc(light)
+    np.testing.assert_allclose(unit[0], 1.0)
+    np.testing.assert_allclose(unit * dc, light, rtol=1e-15)     # albedo x dc keeps albedo x light
+    np.testing.assert_array_equal(dc, light[0])
+    assert unit.shape == light.shape and np.all(np.isfinite(albedo * dc))
+
+
+def test_unit_dc_leaves_a_dark_channel_as_it_is():
+    light = np.array([[1.0, 0.0, 1e-310], [0.5, 0.2, 0.1]])
+    unit, dc = unit_dc(light)
+    np.testing.assert_array_equal(dc, [1.0, 1.0, 1.0])
+    np.testing.assert_array_equal(unit, light)
+
+
+def test_edge_cost_ratio_is_one_for_the_same_residuals_and_below_for_smaller_ones():
+    rng = np.random.default_rng(2)
+    base = rng.standard_cauchy((500, 3)) * 0.1
+    assert edge_cost_ratio(base, base) == pytest.approx(1.0)
+    assert edge_cost_ratio(base, 0.5 * base) < 1.0 < edge_cost_ratio(base, 2.0 * base)
+
+
+def test_edge_cost_ratio_leaves_out_unlit_edges():
+    base = np.array([[0.1, 0.2, 0.1], [0.3, 0.1, 0.2], [np.inf, 0.0, 0.0], [0.2, 0.2, 0.2]])
+    trial = base.copy()
+    trial[1, 0] = np.nan
+    finite = [0, 3]
+    assert edge_cost_ratio(base, trial) == pytest.approx(edge_cost_ratio(base[finite], trial[finite]))
+
+
+def test_psnr_convention():
+    assert psnr_db(0.01, 1.0) == pytest.approx(20.0)
+    assert psnr_db(1.0, 10.0) == pytest.approx(20.0)          # the peak scales with the signal
+    assert psnr_db(0.0, 1.0) == PSNR_CAP_DB == psnr_db(1e-12, 1.0)
