@@ -9,7 +9,7 @@ import numpy as np
 from .config import EstimatorConfig
 from .core.data import MultiViewData
 from .core.errors import InputError
-from .diagnostics import trust
+from .diagnostics import screening, trust
 from .methods import get_method
 from .model.estimate import Estimate
 from .model.reflection_models import reflection_model
@@ -69,19 +69,20 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     except np.linalg.LinAlgError as exc:
         raise InputError(f"the solve is singular ({exc}): the observations do not determine the albedos and "
                          "the light (too few lit views or faces?)") from None
-    for name in ("diffuse", "specular", "pseudo_sh"):
-        if not np.all(np.isfinite(getattr(est, name))):
-            raise InputError(f"the solve produced non-finite {name}: the observations do not determine the "
-                             "albedos and the light (too few lit views or faces?)")
+    if not np.all(np.isfinite(est.pseudo_sh)):
+        raise InputError("the solve produced a non-finite light: the observations do not determine the albedos and "
+                         "the light (too few lit views or faces?)")
     solve_seconds = time.perf_counter() - t
+    t = time.perf_counter()
+    est.info["trust"], stats, unestimated = _screen_and_diagnose(prep, est, [v.name for v in data.views],
+                                                                  cls.reports_residual)
+    est.info["unestimated"] = unestimated
     est.info["observations"] = int(len(prep.obs.face))
     est.info["observations_all"] = int(len(prep.all_obs.face))
     est.info["unobserved_share"] = float(1.0 - est.observed.mean())
     est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
     rejected = prep.all_obs.rejected
     est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
-    t = time.perf_counter()
-    est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
     est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
                            "total": time.perf_counter() - t0}
     if offsets is not None:
@@ -100,6 +101,31 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]]
     return est
+
+
+def _screen_and_diagnose(prep, est: Estimate, view_names: list[str],
+                         fitted: bool) -> tuple[dict, dict, dict[str, int]]:
+    """Faces whose albedo the data do not determine marked unestimated
+    (:mod:`estimator.diagnostics.screening`), then the trust diagnostics of what remains.
+    ``fitted``: the method fits the reflection model to the observations, so each albedo's
+    standard error under it is its own (a method that fits nothing is judged by range only).
+    Returns the trust summary, its per-face arrays and the count of faces set aside per reason."""
+    counts = screening.mark_unestimated(est, screening.out_of_range(est))
+    if not est.observed.any():
+        raise InputError("no face has a finite albedo within the physical range: the observations do not "
+                         "determine the albedos and the light (too few lit views or faces?)")
+    loose = np.zeros(len(est.observed), bool)
+    if fitted:
+        diffuse_precision, specular_precision = trust.albedo_precision(prep, est)
+        loose = screening.undetermined(est, specular_precision if est.config.components == "specular"
+                                       else diffuse_precision)
+    if loose.any():
+        counts.update(screening.mark_unestimated(est, np.where(loose, 3, 0).astype(np.int8)))
+        if not est.observed.any():
+            raise InputError("no face's albedo is determined by the observations (each one's standard error "
+                             "exceeds its value): add views or light")
+    summary, stats = trust.diagnose(prep, est, view_names)
+    return summary, stats, counts
 
 
 def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates) -> Estimate:

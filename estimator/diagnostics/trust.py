@@ -139,6 +139,11 @@ def warnings_for(est: Estimate) -> list[str]:
     """What makes an estimate untrustworthy without ground truth, one line each."""
     out = []
     info = est.info
+    unestimated = info.get("unestimated") or {}
+    if unestimated:
+        out.append(f"{sum(unestimated.values())} face(s) left unestimated, their albedo not determined by the data: "
+                   + ", ".join(f"{n} {reason}" for reason, n in unestimated.items())
+                   + " (face_stats 'unestimated_reason'; reports treat them as missing)")
     dof = info.get("degrees_of_freedom")
     if dof and dof["unknowns"] >= dof["observations"]:
         out.append(f"underdetermined: {dof['unknowns']} unknowns for {dof['observations']} observations "

@@ -89,7 +89,8 @@ def write_run(folder: str, est: Estimate, dataset: str, overwrite: bool = False,
 
 
 FACE_STATS = {  # per-face arrays of estimate.npz (face_<name>): trailing shape, integer, inf allowed
-    "observations": ((), True, False), "albedo_se": ((3,), False, True), "albedo_history": ((None, 3), False, False)}
+    "observations": ((), True, False), "albedo_se": ((3,), False, True), "albedo_history": ((None, 3), False, False),
+    "unestimated_reason": ((), True, False)}
 
 
 def _face_stats(npz: str, data: dict, f: int) -> dict:

@@ -1,0 +1,77 @@
+"""Faces whose albedo the observations do not determine: found after the solve, marked
+unestimated with a reason, and never reported as a number.
+
+Three reasons, each a property of the data or of physics, none fitted to a scene:
+
+* ``non-finite``: the solve gave NaN or infinity.
+* ``beyond physical range``: the albedo's largest channel exceeds :data:`MAX_ALBEDO_RATIO`
+  times the median luminance of the estimated faces whose albedo is not zero. Albedos lie in (0, 1] and no real surface
+  reflects less than about 1 % (:data:`DARKEST_ALBEDO`), so no face can be more than 100 times
+  brighter than the median face, whatever the unknown overall scale (the gauge).
+* ``undetermined``: the standard error of the albedo the face takes (its own, or its group's
+  when the method shares one albedo over a region) is at least :data:`MAX_RELATIVE_SE` times
+  the face's whole albedo (diffuse plus specular): at one sigma the observations cannot tell
+  it from zero.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.estimate import Estimate
+
+DARKEST_ALBEDO = 0.01                  # black velvet, carbon black: the darkest real reflectances
+MAX_ALBEDO_RATIO = 1.0 / DARKEST_ALBEDO
+MAX_RELATIVE_SE = 1.0
+REASONS = ("non-finite", "beyond physical range", "undetermined")
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])   # Rec. 709
+
+
+def out_of_range(est: Estimate) -> np.ndarray:
+    """(F,) int8 reason code (1-based index into :data:`REASONS`, 0: kept) of the faces whose
+    albedo is non-finite or beyond the physical range."""
+    albedo = est.diffuse + est.specular                                    # (F, 3)
+    code = np.zeros(len(albedo), np.int8)
+    finite = np.all(np.isfinite(albedo), axis=1)
+    code[est.observed & ~finite] = 1
+    kept = est.observed & finite
+    luminance = np.where(kept, np.abs(np.where(finite[:, None], albedo, 0.0)) @ LUMINANCE, 0.0)
+    if np.any(luminance > 0):   # a zero albedo carries no level (the SE test judges it)
+        level = float(np.median(luminance[luminance > 0]))
+        code[kept & (np.abs(albedo).max(axis=1) > MAX_ALBEDO_RATIO * level)] = 2
+    return code
+
+
+def undetermined(est: Estimate, precision: np.ndarray) -> np.ndarray:
+    """(F,) bool faces whose albedo's relative standard error is at least :data:`MAX_RELATIVE_SE`.
+
+    ``precision`` (F, 3): each face's precision of the albedo it estimates (the diffuse, or the
+    specular for specular-only data) with the light fixed (:func:`trust.albedo_precision`);
+    faces sharing a label share one albedo, whose precision is the sum of theirs. The error is
+    relative to the face's whole albedo: a face whose light the specular term carries has a
+    determined appearance even where its diffuse part is zero."""
+    albedo = est.diffuse + est.specular
+    observed = est.observed & (est.labels >= 0)
+    if not observed.any():
+        return np.zeros(len(albedo), bool)
+    _, group = np.unique(est.labels[observed], return_inverse=True)
+    summed = np.stack([np.bincount(group, precision[observed, k]) for k in range(3)], axis=1)
+    with np.errstate(divide="ignore"):
+        se = 1.0 / np.sqrt(summed[group])                                 # (n, 3), inf without information
+    relative = np.linalg.norm(se, axis=1) / np.maximum(np.linalg.norm(albedo[observed], axis=1), 1e-300)
+    out = np.zeros(len(albedo), bool)
+    out[np.nonzero(observed)[0]] = relative >= MAX_RELATIVE_SE
+    return out
+
+
+def mark_unestimated(est: Estimate, code: np.ndarray) -> dict[str, int]:
+    """Mark the faces with a reason code unestimated in place (albedos 0, label -1, not
+    observed) and record the codes in ``face_stats['unestimated_reason']``; returns the count
+    per reason (only reasons that occur)."""
+    marked = code > 0
+    est.diffuse[marked] = 0.0
+    est.specular[marked] = 0.0
+    est.labels[marked] = -1
+    est.observed[marked] = False
+    previous = est.face_stats.get("unestimated_reason")
+    est.face_stats["unestimated_reason"] = code if previous is None else np.maximum(previous, code)
+    return {REASONS[k - 1]: int(np.sum(code == k)) for k in range(1, len(REASONS) + 1) if np.any(code == k)}

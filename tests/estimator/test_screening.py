@@ -1,0 +1,90 @@
+"""Faces whose albedo the data do not determine are marked unestimated with a reason and never
+written as a number."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from estimator import Estimate, EstimatorConfig, MultiViewData, RayCaster, estimate
+from estimator.diagnostics import screening
+
+from .micro import micro_config, micro_scene
+
+
+def _estimate(diffuse, labels=None, components="both"):
+    f = len(diffuse)
+    return Estimate(np.array(diffuse, float), np.zeros((f, 3)), np.eye(9, 3), np.arange(f) if labels is None
+                    else np.array(labels), np.ones(f, bool), "test", EstimatorConfig(components=components))
+
+
+def test_non_finite_and_out_of_range_faces_get_their_reason():
+    diffuse = np.full((10, 3), 0.3)
+    diffuse[2] = [np.nan, 0.1, 0.1]
+    diffuse[5] = [0.2, 0.2, 4e5]          # the blue channel beyond 100 x the median face
+    diffuse[7] = [20.0, 20.0, 20.0]       # 67 x the median face: within the physical range
+    code = screening.out_of_range(_estimate(diffuse))
+    np.testing.assert_array_equal(np.nonzero(code)[0], [2, 5])
+    assert code[2] == 1 and code[5] == 2
+
+
+def test_a_region_is_judged_by_its_summed_precision():
+    diffuse = np.full((4, 3), 0.5)
+    precision = np.full((4, 3), 3.0)       # one face alone: relative SE 1/sqrt(3) x sqrt(3) / 0.87 > 1
+    alone = screening.undetermined(_estimate(diffuse), precision)
+    shared = screening.undetermined(_estimate(diffuse, labels=[0, 0, 0, 0]), precision)
+    assert alone.all() and not shared.any()
+
+
+def test_marked_faces_are_zero_unlabelled_and_counted():
+    est = _estimate(np.full((3, 3), 0.4))
+    counts = screening.mark_unestimated(est, np.array([0, 2, 3], np.int8))
+    assert counts == {"beyond physical range": 1, "undetermined": 1}
+    np.testing.assert_array_equal(est.observed, [True, False, False])
+    np.testing.assert_array_equal(est.labels, [0, -1, -1])
+    assert np.all(est.diffuse[1:] == 0)
+    np.testing.assert_array_equal(est.face_stats["unestimated_reason"], [0, 2, 3])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return micro_scene()
+
+
+def test_a_face_made_absurd_on_purpose_is_not_written(scene):
+    """One face's pixels made 10^4 times too bright in every view: the per-face solve gives it an
+    absurd albedo, which the estimate marks unestimated and warns of."""
+    data, _ = scene
+    caster = RayCaster(data.mesh)
+    target = 7
+    views = []
+    for view in data.views:
+        face = caster.face_id_buffers([view.camera])[0].reshape(view.rgb.shape[:2])
+        rgb = view.rgb.copy()
+        rgb[face == target] *= 1e4
+        views.append(replace(view, rgb=rgb))
+    est = estimate(MultiViewData(data.mesh, views), "bilinear-per-face", micro_config(robust_loss="none"))
+    assert not est.observed[target] and np.all(est.diffuse[target] == 0)
+    assert est.face_stats["unestimated_reason"][target] == 2
+    assert est.info["unestimated"]["beyond physical range"] >= 1
+    assert any("left unestimated" in w for w in est.info["warnings"])
+    assert np.all(np.abs(est.diffuse[est.observed]).max(axis=1) <= 100 * np.median(est.diffuse[est.observed]))
+
+
+@pytest.mark.parametrize("method", ["retinex-segmented", "known-illumination"])
+def test_clean_data_lose_no_face(scene, method):
+    data, truth = scene
+    known = {"known_sh": truth.pseudo_sh} if method == "known-illumination" else {}
+    est = estimate(data, method, micro_config(), **known)
+    assert est.info["unestimated"] == {}
+
+
+def test_faces_a_per_face_solve_leaves_at_zero_are_undetermined(scene):
+    """Without the light, per-face diffuse and specular trade against each other; faces whose
+    solve ends at zero in both carry no albedo and are marked, not written as 0."""
+    data, _ = scene
+    est = estimate(data, "bilinear-per-face", micro_config())
+    reason = est.face_stats["unestimated_reason"]
+    assert est.info["unestimated"].get("undetermined", 0) == int(np.sum(reason == 3))
+    assert np.all(est.diffuse[est.observed] + est.specular[est.observed] > 0)
