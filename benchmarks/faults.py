@@ -26,7 +26,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
-from real_light import score  # noqa: E402
+from scoring import score  # noqa: E402
 
 from estimator import estimate  # noqa: E402
 from estimator.diagnostics.validation import cross_validate  # noqa: E402

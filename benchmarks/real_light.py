@@ -24,32 +24,16 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import numpy as np  # noqa: E402
+from scoring import score  # noqa: E402
 
 from estimator import estimate  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
 from harness.scene.generate import generate  # noqa: E402
 from harness.scene.spec import load_spec, resolve_scene  # noqa: E402
-from reports import metrics  # noqa: E402
-from reports.ground_truth import evaluation_mask, true_irradiance  # noqa: E402
-
-
-def score(ds, truth, est, component: str = "diffuse") -> dict:
-    """PSNR and share within ±10 % (least-squares gauge) of one albedo component, ARI, and
-    the evaluated faces (the benchmarks' common scoring)."""
-    irr = true_irradiance(ds.data.mesh, truth)
-    mask = evaluation_mask(truth, irr, est.observed, component)
-    estimated, true = getattr(est, component), getattr(truth, component)
-    lstsq = metrics.albedo_ratios(estimated, true, mask, "lstsq")
-    o = est.observed & (est.labels >= 0)
-    ari = (
-        metrics.adjusted_rand_index(truth.regions[o], est.labels[o]) if truth.regions is not None and o.any() else None
-    )
-    return {"psnr": metrics.albedo_psnr(estimated, true, mask),
-            "within_10": metrics.ratio_summary(lstsq[:, 3])["within_10"], "ari": ari,
-            "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}
 
 
 def light_overrides(probe: str) -> dict:

@@ -117,7 +117,12 @@ def cmd_scenes(args) -> int:
 def cmd_generate(args) -> int:
     from harness.scene.generate import generate
 
-    spec = load_spec(resolve_scene(args.scene), args.profile, _overrides(args))
+    if args.scene == "random":   # the seeded random family (harness.scene.random_family)
+        from harness.scene.random_family import random_spec
+
+        spec = random_spec(args.seed or 0, args.profile, _overrides(args))
+    else:
+        spec = load_spec(resolve_scene(args.scene), args.profile, _overrides(args))
     check_output(args.output, spec.inputs(), args.overwrite)
     summary = generate(spec, args.output, overwrite=args.overwrite, variant=args.variant, log=_err)
     summary["peak_rss_mib"] = _peak_rss_mib()
@@ -528,7 +533,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_scenes)
 
     g = sub.add_parser("generate", help="render a scene spec into a dataset folder")
-    g.add_argument("scene", help="scene spec TOML, or the name of a shipped scene")
+    g.add_argument("scene", help="scene spec TOML, the name of a shipped scene, or 'random' (the seeded random "
+                                 "family: --seed N draws the scene)")
     g.add_argument("-o", "--output", required=True, help="dataset folder to create")
     g.add_argument("--profile", help="a [profiles.NAME] table of the spec, e.g. benchmark")
     g.add_argument("--resolution", type=_positive_int, help="image width and height in pixels")

@@ -18,6 +18,7 @@ from harness.scene.illumination import Illumination, build_illumination
 from harness.scene.render import build_scene, make_cameras, render_views
 from harness.scene.spec import AlbedoSpec, SceneSpec, SpecError
 from harness.scene.textures import (
+    pattern_albedo,
     region_labels,
     spherical_texture_average,
     uv_texture_average,
@@ -32,9 +33,11 @@ def build_mesh(spec: SceneSpec) -> tuple[TriangleMesh, np.ndarray | None]:
     return geometry.build_geometry(spec.geometry, spec.seed)
 
 
-def _albedo(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where: str) -> np.ndarray:
+def _albedo(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where: str, seed: int = 0) -> np.ndarray:
     if albedo.value is not None:
         return np.tile(np.asarray(albedo.value, float) * albedo.scale, (mesh.num_faces, 1))
+    if albedo.pattern is not None:
+        return albedo.scale * pattern_albedo(mesh, albedo.pattern, albedo.colors, albedo.frequency, albedo.axis, seed)
     texture = read_linear_rgb(albedo.texture)
     if albedo.mapping == "uv":
         if uv is None:
@@ -45,15 +48,22 @@ def _albedo(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where
 
 def build_materials(mesh: TriangleMesh, spec: SceneSpec, uv: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Per-face (diffuse (F, 3), specular (F, 3), regions (F,) or None)."""
+    """Per-face (diffuse (F, 3), specular (F, 3), regions (F,) or None). A region with an
+    ``albedo`` texture takes that texture's values on its faces (seeded by the spec's seed
+    plus the region's index)."""
     m = spec.material
     if m.regions:
         labels = region_labels(mesh, [(r.axis, r.ranges) for r in m.regions])
         diffuse = np.array([r.diffuse for r in m.regions], float)[labels]
         specular = np.array([r.specular for r in m.regions], float)[labels]
+        for index, region in enumerate(m.regions):
+            if region.albedo is not None:
+                inside = labels == index
+                textured = _albedo(mesh, uv, region.albedo, f"material.regions[{index}].albedo", spec.seed + index)
+                diffuse[inside] = textured[inside]
         return diffuse, specular, labels
-    return (_albedo(mesh, uv, m.diffuse, "material.diffuse"),
-            _albedo(mesh, uv, m.specular, "material.specular"), None)
+    return (_albedo(mesh, uv, m.diffuse, "material.diffuse", spec.seed),
+            _albedo(mesh, uv, m.specular, "material.specular", spec.seed), None)
 
 
 @dataclasses.dataclass
@@ -69,7 +79,7 @@ class GeneratedScene:
 
     def ground_truth(self) -> GroundTruth:
         return GroundTruth(self.diffuse, self.specular, self.illumination.sh(GROUND_TRUTH_SH_ORDER),
-                           material_dict(self.spec.material), self.illumination.to_json(), self.regions)
+                           material_dict(self.spec.material, self.regions), self.illumination.to_json(), self.regions)
 
     def render(self, cameras, illumination: Illumination | None = None, desc: str = "render") -> list[np.ndarray]:
         """RGBA images (H, W, 4) of ``cameras``, optionally under another illumination."""
@@ -77,19 +87,28 @@ class GeneratedScene:
             return []
         r = self.spec.render
         light = illumination or self.illumination
-        scene = build_scene(self.mesh, self.diffuse, self.specular, material_dict(self.spec.material), light,
+        scene = build_scene(self.mesh, self.diffuse, self.specular, material_dict(self.spec.material, self.regions),
+                            light,
                             cameras[0], r.spp, r.resolved_integrator(self.spec.illumination), r.max_depth)
         return render_views(scene, cameras, r.spp, self.spec.seed, desc)
 
 
-def material_dict(m) -> dict:
+def material_dict(m, regions: np.ndarray | None = None) -> dict:
     """The BRDF of a material spec as stored in ground_truth/illumination.json (``brdf``).
+
+    An object of mixed materials (:attr:`MaterialSpec.mixed`) is ``{'model': 'mixed',
+    'parts': [one region's BRDF each], 'labels': each face's region (F,)}``; its ``exponent``
+    is the sharpest part's (the reports' pseudo illumination is then only approximate).
 
     ``exponent`` is the Phong exponent whose lobe filters the true radiance into the
     pseudo illumination the reports compare with: the spec's for Phong; for Mitsuba's
     ``roughplastic`` the Phong exponent of the same Beckmann width, 2 / alpha^2 - 2;
     10000 (a mirror: the filter is 1 to 0.6 % at order 10) for ``plastic`` and ``diffuse``.
     """
+    if m.mixed:
+        parts = [material_dict(m.region_material(r)) for r in m.regions]
+        return {"model": "mixed", "parts": parts, "labels": np.asarray(regions).tolist(),
+                "exponent": max(p["exponent"] for p in parts)}
     if m.model == "phong":
         return {"model": "phong", "exponent": float(m.exponent)}
     if m.model == "diffuse":
@@ -115,10 +134,12 @@ def prepare(spec: SceneSpec) -> GeneratedScene:
     mesh, uv = build_mesh(spec)
     diffuse, specular, regions = build_materials(mesh, spec, uv)
     m = spec.material
-    if m.model in ("plastic", "roughplastic"):
-        specular = np.full_like(diffuse, fresnel_normal(m.int_ior))
-    elif m.model == "diffuse":
-        specular = np.zeros_like(diffuse)
+    for faces, part in ([(regions == k, m.region_material(r)) for k, r in enumerate(m.regions)] if m.mixed
+                        else [(slice(None), m)]):
+        if part.model in ("plastic", "roughplastic"):
+            specular[faces] = fresnel_normal(part.int_ior)
+        elif part.model == "diffuse":
+            specular[faces] = 0.0
     return GeneratedScene(spec, mesh, diffuse, specular, regions, build_illumination(spec.illumination, spec.seed))
 
 

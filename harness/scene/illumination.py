@@ -35,6 +35,8 @@ class Illumination:
     envmap : (H, W, 3) radiance map in Mitsuba's envmap orientation (scaled).
     sunsky : parameters of Mitsuba's Hosek-Wilkie ``sunsky`` (to_sun, turbidity,
         ground_albedo, sun_scale, sky_scale, scale), sun direction in world space (+Y up).
+    spheres : spherical area lights on a uniform environment: ``positions`` (K, 3), ``radii``
+        (K,), ``radiance`` (K, 3) of their surfaces, ``ambient`` (3,) the environment's radiance.
     rotation : (3, 3) rotation applied to the envmap or sun-sky (its Mitsuba ``to_world``).
     """
 
@@ -45,6 +47,7 @@ class Illumination:
     intensity: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     envmap: np.ndarray | None = None
     sunsky: dict | None = None
+    spheres: dict | None = None
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
 
     @property
@@ -54,7 +57,9 @@ class Illumination:
     def rotated(self, rotation: np.ndarray) -> "Illumination":
         """The same light turned by ``rotation`` (3, 3) about the world origin."""
         r = np.asarray(rotation, dtype=np.float64)
-        return replace(self, to_light=self.to_light @ r.T, positions=self.positions @ r.T,
+        spheres = None if self.spheres is None else {
+            **self.spheres, "positions": (np.asarray(self.spheres["positions"]) @ r.T).tolist()}
+        return replace(self, to_light=self.to_light @ r.T, positions=self.positions @ r.T, spheres=spheres,
                        rotation=r @ self.rotation)
 
     def sh(self, order: int, center: np.ndarray | None = None) -> np.ndarray:
@@ -77,6 +82,8 @@ class Illumination:
                              "to_world": mi.ScalarTransform4f(to_world)}
         if self.sunsky is not None:
             out["sunsky"] = sunsky_emitter(mi, self)
+        if self.spheres is not None:
+            out.update(sphere_emitters(mi, self.spheres))
         return out
 
     def to_json(self) -> dict:
@@ -191,6 +198,54 @@ class SunSky(LightKind):
         return Illumination(self.name, sunsky=data["sunsky"], rotation=np.array(data.get("rotation", np.eye(3)), float))
 
 
+@light_kind
+class Spheres(LightKind):
+    """Spherical area lights of uniform radiance on a uniform (dim) environment."""
+
+    name = "spheres"
+
+    def sh(self, light, order, center):
+        return spheres_sh(light.spheres, order, center)
+
+    def to_json(self, light):
+        return {"spheres": light.spheres}
+
+    def from_json(self, data, envmap):
+        return Illumination(self.name, spheres=data["spheres"])
+
+
+def spheres_sh(spheres: dict, order: int, center: np.ndarray) -> np.ndarray:
+    """((L + 1)^2, 3) exact SH of the radiance arriving at ``center`` (3,): the ambient radiance
+    A everywhere, and inside the cone of half-angle a that each sphere subtends its radiance L
+    instead. A uniform cap about d has the zonal coefficients 2 pi (L - A) times the integral
+    of P_l from cos a to 1, (P_{l-1} - P_{l+1})(cos a) / (2 l + 1) (1 - cos a for l = 0), times
+    Y_lm(d); the ambient adds A sqrt(4 pi) to the DC."""
+    from scipy.special import eval_legendre
+
+    ambient = np.asarray(spheres["ambient"], float)
+    out = np.zeros((sh.num_coeffs(order), 3))
+    out[0] = ambient * np.sqrt(4 * np.pi)
+    l = np.arange(order + 1)
+    for position, radius, radiance in zip(spheres["positions"], spheres["radii"], spheres["radiance"]):
+        offset = np.asarray(position, float) - center
+        distance = np.linalg.norm(offset)
+        x = np.sqrt(max(1.0 - (radius / distance) ** 2, 0.0))               # cos of the half-angle
+        band = (eval_legendre(np.maximum(l - 1, 0), x) - eval_legendre(l + 1, x)) / (2 * l + 1)
+        band[0] = 1.0 - x
+        cap = sh.project_directional(order, (offset / distance)[None], (np.asarray(radiance, float) - ambient)[None])
+        out += 2 * np.pi * sh.expand_per_degree(band)[:, None] * cap
+    return out
+
+
+def sphere_emitters(mi, spheres: dict) -> dict:
+    """Mitsuba shapes with ``area`` emitters for the spheres, and a ``constant`` environment."""
+    out = {"ambient": {"type": "constant", "radiance": {"type": "rgb", "value": list(spheres["ambient"])}}}
+    for k, (p, r, e) in enumerate(zip(spheres["positions"], spheres["radii"], spheres["radiance"])):
+        out[f"sphere_light_{k:03d}"] = {"type": "sphere", "center": list(p), "radius": float(r),
+                                        "emitter": {"type": "area", "radiance": {"type": "rgb", "value": list(e)}}}
+    return out
+
+
 SpecBuilder = Callable[..., Illumination]
 SPEC_TYPES: dict[str, SpecBuilder] = {}
 
@@ -206,8 +261,17 @@ def illumination_type(name: str, delta: bool = False) -> Callable[[SpecBuilder],
 
 
 def build_illumination(spec, seed: int = 0) -> Illumination:
-    """Resolve a validated illumination spec into lights (clustering probes as needed)."""
-    return SPEC_TYPES[spec.type](spec, seed)
+    """Resolve a validated illumination spec into lights (clustering probes as needed), its
+    colour cast ``tint`` applied."""
+    light = SPEC_TYPES[spec.type](spec, seed)
+    tint = np.asarray(spec.tint, float)
+    if np.all(tint == 1.0):
+        return light
+    spheres = None if light.spheres is None else {
+        **light.spheres, "radiance": (np.asarray(light.spheres["radiance"]) * tint).tolist(),
+        "ambient": (np.asarray(light.spheres["ambient"]) * tint).tolist()}
+    return replace(light, irradiance=light.irradiance * tint, intensity=light.intensity * tint,
+                   envmap=None if light.envmap is None else light.envmap * tint, spheres=spheres)
 
 
 @illumination_type("directional", delta=True)
@@ -230,6 +294,15 @@ def _sunsky(spec, seed: int) -> Illumination:
         "to_sun": (to_sun / np.linalg.norm(to_sun)).tolist(), "turbidity": spec.turbidity,
         "ground_albedo": spec.ground_albedo, "sun_scale": spec.sun_scale, "sky_scale": spec.sky_scale,
         "scale": spec.scale}, rotation=sh.axis_angle_matrix("y", spec.rotation))
+
+
+@illumination_type("spheres")
+def _spheres(spec, seed: int) -> Illumination:
+    return Illumination("spheres", spheres={
+        "positions": [list(map(float, light.position)) for light in spec.lights],
+        "radii": [float(light.radius) for light in spec.lights],
+        "radiance": [[spec.scale * v for v in light.radiance] for light in spec.lights],
+        "ambient": [spec.scale * v for v in spec.ambient]})
 
 
 @illumination_type("probe-clustered", delta=True)

@@ -26,7 +26,9 @@ def camera_positions(spec: CameraSpec, test: bool = False) -> np.ndarray:
     'fibonacci' spreads them uniformly over the sphere of radius ``distance``;
     test views use a rotated lattice so they fall between training views.
     'ring' places them at ``elevation`` degrees, evenly in azimuth (test views
-    offset by half a step).
+    offset by half a step). 'table-top' spreads them over the band of elevations from
+    ``min_elevation`` to ``max_elevation`` degrees (an object on a table: the underside is
+    never seen), uniformly in area on a golden-angle spiral (test views between them).
     """
     n = spec.test_count if test else spec.count
     if n == 0:
@@ -38,6 +40,13 @@ def camera_positions(spec: CameraSpec, test: bool = False) -> np.ndarray:
             pts = fibonacci_sphere(n)
         if test:
             pts = pts @ (axis_angle_matrix("y", 23.0) @ axis_angle_matrix("x", 11.0)).T
+    elif spec.distribution == "table-top":
+        lo, hi = np.sin(np.radians([spec.min_elevation, spec.max_elevation]))
+        k = np.arange(n) + (0.5 if test else 0.0)
+        height = lo + (hi - lo) * (k + 0.5) / n
+        az = k * np.pi * (3.0 - np.sqrt(5.0)) + (0.3 if test else 0.0)
+        ring = np.sqrt(1.0 - height ** 2)
+        pts = np.stack([ring * np.sin(az), height, ring * np.cos(az)], axis=1)
     else:
         az = 2 * np.pi * (np.arange(n) + (0.5 if test else 0.0)) / n
         el = np.radians(spec.elevation)
@@ -123,6 +132,20 @@ def _atlas_mesh(mi, mesh: TriangleMesh, diffuse: np.ndarray, bsdf: dict):
     return m
 
 
+def _object(mi, mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, material):
+    """The Mitsuba mesh of one material with its per-face albedos (an atlas for Mitsuba's own
+    materials, face attributes for pseudolight's plugins)."""
+    bsdf = bsdf_dict(material)
+    if bsdf["type"] in ("diffuse", "plastic", "roughplastic"):
+        return _atlas_mesh(mi, mesh, diffuse, bsdf)
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf)
+    m = mitsuba_mesh(mesh, "object", props=props)
+    m.add_attribute("face_diffuse", 3, mi.Float(np.asarray(diffuse, np.float32).ravel()))
+    m.add_attribute("face_specular", 3, mi.Float(np.asarray(specular, np.float32).ravel()))
+    return m
+
+
 def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, material: float | dict | None,
                 illumination: Illumination, camera: Camera, spp: int, integrator: str = "direct",
                 max_depth: int = 6):
@@ -132,20 +155,19 @@ def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, m
     ----------
     diffuse, specular : (F, 3) per-face linear albedo.
     material : see :func:`bsdf_dict` (a Phong exponent, None for the estimator's
-        diffuse + mirror model, or a ground-truth BRDF dict).
+        diffuse + mirror model, or a ground-truth BRDF dict; a 'mixed' one renders each of
+        its ``parts`` on the faces its ``labels`` give it).
     integrator : 'direct' (deterministic loop over delta lights) or 'path'.
     """
     mi = backend.set_variant()
     plugins.register_all()
-    bsdf = bsdf_dict(material)
-    if bsdf["type"] in ("diffuse", "plastic", "roughplastic"):
-        m = _atlas_mesh(mi, mesh, diffuse, bsdf)
+    if isinstance(material, dict) and material.get("model") == "mixed":   # one Mitsuba mesh per material
+        labels = np.asarray(material["labels"])
+        objects = {f"object_{k}": _object(mi, TriangleMesh(mesh.vertices, mesh.faces[labels == k]),
+                                          diffuse[labels == k], specular[labels == k], part)
+                   for k, part in enumerate(material["parts"]) if np.any(labels == k)}
     else:
-        props = mi.Properties()
-        props["bsdf"] = mi.load_dict(bsdf)
-        m = mitsuba_mesh(mesh, "object", props=props)
-        m.add_attribute("face_diffuse", 3, mi.Float(np.asarray(diffuse, np.float32).ravel()))
-        m.add_attribute("face_specular", 3, mi.Float(np.asarray(specular, np.float32).ravel()))
+        objects = {"object": _object(mi, mesh, diffuse, specular, material)}
     if integrator == "direct":
         if not illumination.is_delta:
             raise ValueError("the direct integrator needs delta lights; use 'path' for an envmap")
@@ -156,7 +178,7 @@ def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, m
         "type": "scene",
         "embree_use_robust_intersections": True,
         "integrator": integ,
-        "object": m,
+        **objects,
         "sensor": mitsuba_sensor(mi, camera, spp),
     }
     scene.update(illumination.mitsuba_emitters(mi))

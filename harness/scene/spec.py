@@ -13,6 +13,8 @@ import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from estimator import InputError
 from harness.scene.geometry import GEOMETRY_KINDS
 from harness.scene.illumination import SPEC_TYPES
@@ -100,35 +102,79 @@ class GeometrySpec:
             raise SpecError(f"geometry.file is only for geometry.type = 'mesh', not {self.type!r}")
 
 
+PATTERNS = ("noise", "stripes", "checks", "gradient")
+MATERIAL_MODELS = ("phong", "diffuse", "plastic", "roughplastic")
+
+
 @dataclass
 class AlbedoSpec:
+    """An albedo: a constant ``value``, an image ``texture`` (spherical or UV mapping), or a
+    procedural ``pattern`` between two ``colors`` (:func:`harness.scene.textures.pattern_albedo`:
+    ``frequency`` bands or cells over the sphere of directions, ``axis`` for stripes and
+    gradients, ``noise`` seeded by the scene's seed)."""
+
     value: list[float] | None = None
     texture: str | None = None
+    pattern: str | None = None
+    colors: list[list[float]] = field(default_factory=lambda: [[0.05, 0.05, 0.05], [0.8, 0.8, 0.8]])
+    frequency: float = 4.0
+    axis: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])
     scale: float = 1.0
     mapping: str = "spherical"
 
     def validate(self, where: str, base_dir: str) -> None:
         _choice(f"{where}.mapping", self.mapping, ("spherical", "uv"))
-        if (self.value is None) == (self.texture is None):
-            raise SpecError(f"{where} needs exactly one of 'value' (RGB) or 'texture' (image file)")
+        if sum(x is not None for x in (self.value, self.texture, self.pattern)) != 1:
+            raise SpecError(f"{where} needs exactly one of 'value' (RGB), 'texture' (image file) or 'pattern' "
+                            f"({', '.join(PATTERNS)})")
         if self.value is not None:
             self.value = _vec(f"{where}.value", self.value, nonneg=True)
-        else:
+        elif self.texture is not None:
             self.texture = _asset(f"{where}.texture", self.texture, base_dir)
+        else:
+            _choice(f"{where}.pattern", self.pattern, PATTERNS)
+        if not isinstance(self.colors, list) or len(self.colors) != 2:
+            raise SpecError(f"{where}.colors must be a list of two RGB colours, got {self.colors!r}")
+        self.colors = [_vec(f"{where}.colors[{i}]", c, nonneg=True) for i, c in enumerate(self.colors)]
+        _num(f"{where}.frequency", self.frequency, 0, 64, lo_open=True)
+        self.axis = _vec(f"{where}.axis", self.axis, nonzero=True)
         _num(f"{where}.scale", self.scale, 0)
 
 
 @dataclass
 class RegionSpec:
+    """A part of the object, chosen by direction bands (:func:`harness.scene.textures.region_labels`).
+
+    ``diffuse`` is its uniform albedo, or ``albedo`` a texture inside it; ``model`` (with
+    ``alpha``, ``exponent``, ``int_ior``) gives it a material of its own (an object of mixed
+    materials); None: the object's ``material.model``."""
+
     name: str = ""
     diffuse: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     specular: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     axis: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])
     ranges: list[list[float]] = field(default_factory=list)
+    albedo: AlbedoSpec | None = None
+    model: str | None = None
+    alpha: float | None = None
+    exponent: float | None = None
+    int_ior: float | None = None
 
-    def validate(self, where: str) -> None:
+    def validate(self, where: str, base_dir: str = ".") -> None:
         if not isinstance(self.name, str) or not self.name:
             raise SpecError(f"{where}.name must be a non-empty string")
+        if self.albedo is not None:
+            if self.albedo.mapping != "spherical":
+                raise SpecError(f"{where}.albedo must use the spherical mapping")
+            self.albedo.validate(f"{where}.albedo", base_dir)
+        if self.model is not None:
+            _choice(f"{where}.model", self.model, MATERIAL_MODELS)
+        if self.alpha is not None:
+            _num(f"{where}.alpha", self.alpha, 0.01, 1.0)
+        if self.exponent is not None:
+            _num(f"{where}.exponent", self.exponent, 0, 10000, lo_open=True)
+        if self.int_ior is not None:
+            _num(f"{where}.int_ior", self.int_ior, 1.0, 4.0, lo_open=True)
         self.diffuse = _vec(f"{where}.diffuse", self.diffuse, nonneg=True)
         self.specular = _vec(f"{where}.specular", self.specular, nonneg=True)
         self.axis = _vec(f"{where}.axis", self.axis, nonzero=True)
@@ -138,9 +184,6 @@ class RegionSpec:
         for i, (lo, hi) in enumerate(self.ranges):
             if not -1.0 <= lo <= hi <= 1.0:
                 raise SpecError(f"{where}.ranges[{i}] must satisfy -1 <= lo <= hi <= 1, got {[lo, hi]}")
-
-
-MATERIAL_MODELS = ("phong", "diffuse", "plastic", "roughplastic")
 
 
 @dataclass
@@ -164,12 +207,24 @@ class MaterialSpec:
             if self.diffuse is not None or self.specular is not None:
                 raise SpecError("material.regions cannot be combined with material.diffuse/specular")
             for i, region in enumerate(self.regions):
-                region.validate(f"material.regions[{i}]")
+                region.validate(f"material.regions[{i}]", base_dir)
         else:
             self.diffuse = self.diffuse or AlbedoSpec(value=[0.0, 0.0, 0.0])
             self.specular = self.specular or AlbedoSpec(value=[0.0, 0.0, 0.0])
             self.diffuse.validate("material.diffuse", base_dir)
             self.specular.validate("material.specular", base_dir)
+
+    @property
+    def mixed(self) -> bool:
+        """True when some region has a material of its own: the object mixes materials."""
+        return any(r.model is not None or r.alpha is not None or r.exponent is not None or r.int_ior is not None
+                   for r in self.regions)
+
+    def region_material(self, region: "RegionSpec") -> "MaterialSpec":
+        """The material of one region: the object's, with the region's own settings."""
+        own = {k: getattr(region, k) for k in ("model", "alpha", "exponent", "int_ior")
+               if getattr(region, k) is not None}
+        return dataclasses.replace(self, regions=[], diffuse=None, specular=None, **own)
 
     def uses_uv(self) -> bool:
         return any(a is not None and a.texture is not None and a.mapping == "uv"
@@ -178,10 +233,40 @@ class MaterialSpec:
 
 @dataclass
 class LightSpec:
+    """A directional light (``to_light``, ``irradiance``), a point light (``position``,
+    ``intensity``) or a spherical area light (``position``, ``radius``, ``radiance``)."""
+
     to_light: list[float] | None = None
     irradiance: Any = 1.0
     position: list[float] | None = None
     intensity: Any = 1.0
+    radius: float | None = None
+    radiance: Any = 1.0
+
+
+LIGHT_LISTS = ("directional", "point", "spheres")   # illumination types that list their lights
+
+
+def _check_light(where: str, kind: str, light: LightSpec) -> None:
+    """One entry of ``illumination.lights`` for a light of type ``kind``, validated in place."""
+    if kind == "spheres":
+        if light.position is None or light.radius is None or light.to_light is not None:
+            raise SpecError(f"{where}: a spherical light needs 'position' and 'radius' (and no 'to_light')")
+        light.position = _vec(f"{where}.position", light.position)
+        _num(f"{where}.radius", light.radius, 0, lo_open=True)
+        if np.linalg.norm(light.position) <= light.radius:
+            raise SpecError(f"{where}: the sphere must not contain the origin (the object's centre)")
+        light.radiance = _vec(f"{where}.radiance", light.radiance, nonneg=True)
+    elif kind == "directional":
+        if light.position is not None or light.to_light is None:
+            raise SpecError(f"{where}: a directional light needs 'to_light' (and no 'position')")
+        light.to_light = _vec(f"{where}.to_light", light.to_light, nonzero=True)
+        light.irradiance = _vec(f"{where}.irradiance", light.irradiance, nonneg=True)
+    else:
+        if light.to_light is not None or light.position is None:
+            raise SpecError(f"{where}: a point light needs 'position' (and no 'to_light')")
+        light.position = _vec(f"{where}.position", light.position)
+        light.intensity = _vec(f"{where}.intensity", light.intensity, nonneg=True)
 
 
 @dataclass
@@ -198,26 +283,23 @@ class IlluminationSpec:
     sun_scale: float = 1.0
     sky_scale: float = 1.0
     rotation: float = 0.0
+    ambient: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    tint: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
 
     def validate(self, base_dir: str) -> None:
-
         _choice("illumination.type", self.type, tuple(SPEC_TYPES))
         _num("illumination.scale", self.scale, 0, lo_open=True)
-        if self.type in ("directional", "point"):
+        self.tint = _vec("illumination.tint", self.tint, nonneg=True, nonzero=True)
+        if self.type == "sunsky" and self.tint != [1.0, 1.0, 1.0]:
+            raise SpecError("illumination.tint does not apply to 'sunsky' (its colour is the sky model's)")
+        self.ambient = _vec("illumination.ambient", self.ambient, nonneg=True)
+        if any(self.ambient) and self.type != "spheres":
+            raise SpecError(f"illumination.ambient is the environment of 'spheres', not of {self.type!r}")
+        if self.type in LIGHT_LISTS:
             if not self.lights:
                 raise SpecError(f"illumination.lights must list at least one {self.type} light")
             for i, light in enumerate(self.lights):
-                where = f"illumination.lights[{i}]"
-                if self.type == "directional":
-                    if light.position is not None or light.to_light is None:
-                        raise SpecError(f"{where}: a directional light needs 'to_light' (and no 'position')")
-                    light.to_light = _vec(f"{where}.to_light", light.to_light, nonzero=True)
-                    light.irradiance = _vec(f"{where}.irradiance", light.irradiance, nonneg=True)
-                else:
-                    if light.to_light is not None or light.position is None:
-                        raise SpecError(f"{where}: a point light needs 'position' (and no 'to_light')")
-                    light.position = _vec(f"{where}.position", light.position)
-                    light.intensity = _vec(f"{where}.intensity", light.intensity, nonneg=True)
+                _check_light(f"illumination.lights[{i}]", self.type, light)
         elif self.lights:
             raise SpecError(f"illumination.lights is not used by illumination.type = {self.type!r}")
         if self.type in ("probe-clustered", "envmap"):
@@ -253,11 +335,15 @@ class CameraSpec:
     width: int = 256
     height: int = 256
     elevation: float = 20.0
+    min_elevation: float = 8.0
+    max_elevation: float = 65.0
 
     def validate(self) -> None:
         _num("cameras.count", self.count, 1, 10000, integer=True)
         _num("cameras.test_count", self.test_count, 0, 10000, integer=True)
-        _choice("cameras.distribution", self.distribution, ("fibonacci", "ring"))
+        _choice("cameras.distribution", self.distribution, ("fibonacci", "ring", "table-top"))
+        _num("cameras.min_elevation", self.min_elevation, -89, 89)
+        _num("cameras.max_elevation", self.max_elevation, self.min_elevation, 89)
         _num("cameras.distance", self.distance, 0, lo_open=True)
         _num("cameras.fov", self.fov, 1, 170)
         _num("cameras.width", self.width, 8, 8192, integer=True)
@@ -441,6 +527,13 @@ def _build(where: str, raw: dict, cls):
     return cls(**raw)
 
 
+def _region(where: str, raw: dict) -> RegionSpec:
+    raw = _table(where, raw)
+    if "albedo" in raw:
+        raw["albedo"] = _build(f"{where}.albedo", _table(f"{where}.albedo", raw["albedo"]), AlbedoSpec)
+    return _build(where, raw, RegionSpec)
+
+
 def _estimator_defaults(raw: dict) -> dict:
     """The spec's [estimator] table: estimator settings recommended for this scene."""
     from estimator import REGISTRY, EstimatorConfig
@@ -517,7 +610,7 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
     for key in ("diffuse", "specular"):
         if key in mat:
             mat[key] = _build(f"material.{key}", mat[key], AlbedoSpec)
-    mat["regions"] = [_build(f"material.regions[{i}]", r, RegionSpec)
+    mat["regions"] = [_region(f"material.regions[{i}]", r)
                       for i, r in enumerate(_list("material.regions", mat.get("regions", [])))]
     ill = _table("illumination", raw.get("illumination", {}))
     _check_keys("illumination", ill, IlluminationSpec)

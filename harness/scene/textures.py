@@ -100,3 +100,37 @@ def region_labels(mesh: TriangleMesh, rules: list[tuple[np.ndarray, list[tuple[f
             inside |= (t >= lo) & (t <= hi)
         labels[inside] = index
     return labels
+
+
+def pattern_albedo(mesh: TriangleMesh, pattern: str, colors, frequency: float, axis, seed: int = 0) -> np.ndarray:
+    """(F, 3) a procedural albedo between ``colors`` (2, 3), by the direction d from the bounding-box
+    centre to each face's centroid (so it wraps any body).
+
+    'stripes': bands of width 1 / ``frequency`` in d . axis, alternating; 'checks': cells of
+    180 / ``frequency`` degrees in polar and azimuthal angle, alternating; 'gradient': a smooth
+    ramp along d . axis; 'noise': a smooth random field (real SH of degrees 1 to ``frequency``,
+    seeded by ``seed``), mapped through a logistic so both colours occur.
+    """
+    d = mesh.centroids - mesh.bounds_centre
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    if pattern == "stripes":
+        t = np.floor(frequency * (d @ a + 1.0)) % 2
+    elif pattern == "checks":
+        polar = np.arccos(np.clip(d[:, 1], -1.0, 1.0))
+        azimuth = np.arctan2(d[:, 0], d[:, 2]) + np.pi
+        t = (np.floor(frequency * polar / np.pi) + np.floor(frequency * azimuth / np.pi)) % 2
+    elif pattern == "gradient":
+        t = 0.5 * (d @ a + 1.0)
+    elif pattern == "noise":
+        from estimator import sh
+
+        order = max(int(round(frequency)), 1)
+        coeffs = np.random.default_rng(seed).standard_normal(sh.num_coeffs(order))
+        coeffs[0] = 0.0
+        field = sh.basis(order, d) @ coeffs
+        t = 1.0 / (1.0 + np.exp(-3.0 * field / max(float(np.std(field)), 1e-12)))
+    else:
+        raise ValueError(f"unknown pattern {pattern!r}")
+    c = np.asarray(colors, float)
+    return c[0] * (1.0 - t)[:, None] + c[1] * t[:, None]

@@ -1,0 +1,21 @@
+"""The benchmarks' common scoring of one estimate against its ground truth."""
+from __future__ import annotations
+
+from reports import metrics
+from reports.ground_truth import evaluation_mask, true_irradiance
+
+
+def score(ds, truth, est, component: str = "diffuse") -> dict:
+    """PSNR and share within ±10 % (least-squares gauge) of one albedo component, ARI, the
+    evaluated faces and the share of faces the estimate holds."""
+    irr = true_irradiance(ds.data.mesh, truth)
+    mask = evaluation_mask(truth, irr, est.observed, component)
+    estimated, true = getattr(est, component), getattr(truth, component)
+    lstsq = metrics.albedo_ratios(estimated, true, mask, "lstsq")
+    o = est.observed & (est.labels >= 0)
+    ari = (
+        metrics.adjusted_rand_index(truth.regions[o], est.labels[o]) if truth.regions is not None and o.any() else None
+    )
+    return {"psnr": metrics.albedo_psnr(estimated, true, mask),
+            "within_10": metrics.ratio_summary(lstsq[:, 3])["within_10"], "ari": ari,
+            "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}
