@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import socket
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterator
 
@@ -85,6 +86,26 @@ def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "loca
                 os.environ[k] = v
 
 
+SCHEDULER_PROBE_S = 5.0   # a Dask scheduler sends its handshake at once; a listener that does not speak Dask, never
+
+
+def _probe_scheduler(address: str, timeout: float = SCHEDULER_PROBE_S) -> None:
+    """Refuse an address that does not answer like a Dask scheduler: connect and wait up to
+    ``timeout`` seconds for the first bytes of its handshake (``dask.distributed.Client`` waits
+    forever on a port that accepts but stays silent, such as a bare listener or the dashboard)."""
+    host, _, port = address.removeprefix("tcp://").rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout) as conn:
+            conn.settimeout(timeout)
+            if not conn.recv(1):
+                raise InputError(f"--scheduler {address}: the connection was closed without a Dask handshake")
+    except socket.timeout:
+        raise InputError(f"--scheduler {address}: no Dask handshake within {timeout:g} s (is it the dashboard's "
+                         "port, or not a Dask scheduler?)") from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot connect to the Dask scheduler {address!r}: {exc}") from None
+
+
 def _dask(fn, jobs, scheduler):
     try:
         from dask.distributed import Client
@@ -93,6 +114,8 @@ def _dask(fn, jobs, scheduler):
         raise InputError("--executor dask needs Dask: pip install '.[dask]'") from None
     if scheduler is None:
         raise InputError("--executor dask needs --scheduler tcp://HOST:PORT")
+    if isinstance(scheduler, str) and scheduler.startswith("tcp://"):
+        _probe_scheduler(scheduler)
     try:
         client = Client(scheduler, timeout="10s")
     except (OSError, ValueError, TimeoutError) as exc:

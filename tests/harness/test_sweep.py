@@ -172,3 +172,46 @@ def test_nested_set_tables_merge_into_the_spec(tmp_path):
     d = suite["datasets"][0]
     spec = load_spec(d.spec_path, d.profile, d.overrides)
     assert spec.cameras.count == 5 and spec.cameras.width == 96      # the tiny profile's width is kept
+
+
+@pytest.fixture
+def silent_listener():
+    """A loopback port that accepts connections and never says a word (as the dashboard's or
+    any non-Dask service's port would to a Dask client)."""
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    accepted = []
+    stop = threading.Event()
+
+    def accept():
+        server.settimeout(0.1)
+        while not stop.is_set():
+            try:
+                accepted.append(server.accept()[0])
+            except OSError:
+                continue
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    stop.set()
+    thread.join()
+    for conn in accepted:
+        conn.close()
+    server.close()
+
+
+def test_a_port_that_does_not_speak_dask_is_refused_not_waited_on(silent_listener, tmp_path, capsys):
+    from harness.sweep import executor
+
+    with pytest.raises(InputError, match="no Dask handshake"):
+        executor._probe_scheduler(silent_listener, timeout=0.3)
+    assert main(["bench", "smoke", "-o", str(tmp_path / "b"), "--executor", "dask",
+                 "--scheduler", silent_listener]) == 2
+    err = capsys.readouterr().err
+    assert "no Dask handshake" in err and "Traceback" not in err
+    assert not (tmp_path / "b").exists()
