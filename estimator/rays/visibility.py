@@ -7,9 +7,13 @@ import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
 
 from ..core.data import TriangleMesh
+from ..core.errors import InputError
 from ..core.settings import Section
 from ..core.sh import fibonacci_sphere
 from .raycast import RayCaster
+
+MAX_DIRECTIONS = 65_536   # 0.9-degree spacing, 56x the paper's; the shadow bits grow as faces x directions
+MAX_SHADOW_BYTES = 2 * 2**30   # the shadow bits, checked before allocation (1.3M faces x 1164: 0.2 GiB)
 
 
 @dataclass
@@ -18,13 +22,14 @@ class VisibilityConfig(Section):
 
     Attributes
     ----------
-    directions : sample directions of the shadow function (the paper's 1164).
+    directions : sample directions of the shadow function (the paper's 1164); at most
+        :data:`MAX_DIRECTIONS`.
     """
 
     directions: int = 1164
 
     def check(self):
-        return [(self.directions >= 12, "directions must be >= 12")]
+        return [(12 <= self.directions <= MAX_DIRECTIONS, f"directions must lie in [12, {MAX_DIRECTIONS}]")]
 
 
 @dataclass(frozen=True)
@@ -101,6 +106,10 @@ def compute_visibility(caster: RayCaster, sampling: SphereSampling, max_rays: in
     def vec(cls, a):
         return cls(*(np.ascontiguousarray(a[:, i], dtype=np.float32) for i in range(3)))
 
+    size = mesh.num_faces * ((k + 7) // 8)
+    if size > MAX_SHADOW_BYTES:
+        raise InputError(f"the shadow function of {mesh.num_faces} faces x {k} directions needs {size / 2**30:.1f} GiB "
+                         f"(at most {MAX_SHADOW_BYTES / 2**30:g} GiB): lower directions")
     o_all, n_all, d_all = vec(mi.Point3f, origins), vec(mi.Vector3f, normals), vec(mi.Vector3f, sampling.directions)
     bits = np.zeros((mesh.num_faces, (k + 7) // 8), dtype=np.uint8)
     chunk = max(1, max_rays // k)

@@ -471,3 +471,22 @@ def test_flags_for_another_method_or_executor_are_refused(micro, tmp_path, capsy
                  "--robust-loss applies to", inputs=[ds], absent=[tmp_path / "r2"])
     expect_error(capsys, ["bench", "smoke", "-o", tmp_path / "s", "--scheduler", "tcp://127.0.0.1:1"],
                  "it needs --executor dask", absent=[tmp_path / "s"])
+
+
+def test_resource_settings_are_bounded_before_anything_is_allocated(micro, tmp_path, capsys):
+    """--directions 100000000 grew past 6 GB and ignored SIGTERM; now it is refused at once."""
+    ds, _, _ = micro
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--directions", "100000000"],
+                 "directions must lie in [12, 65536]", inputs=[ds], absent=[tmp_path / "r"])
+
+
+def test_the_shadow_function_is_refused_when_it_would_not_fit(monkeypatch):
+    import numpy as np
+
+    from estimator import InputError, RayCaster, TriangleMesh, compute_visibility, sphere_sampling
+    from estimator.rays import visibility
+
+    mesh = TriangleMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    monkeypatch.setattr(visibility, "MAX_SHADOW_BYTES", 10)    # one face x 200 directions: 25 bytes
+    with pytest.raises(InputError, match="lower directions"):
+        compute_visibility(RayCaster(mesh), sphere_sampling(200))
