@@ -442,10 +442,13 @@ def cmd_import(args) -> int:
         read_mitsuba_xml,
         read_per_face,
         read_uv_textures,
+        xml_referenced_files,
     )
     from harness.io.runs import write_run
 
     files = [p for p in (args.file, args.mesh, args.diffuse, args.specular, args.envmap) if p]
+    if args.source == "mitsuba-xml" and args.file:   # the mesh, textures and envmap the XML names are inputs too
+        files += xml_referenced_files(args.file)
     check_output(args.output, [args.dataset, *files], args.overwrite)
     ds = read_dataset(args.dataset, load_test=False, load_truth=False)
     f = ds.data.mesh.num_faces

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import os
+import xml.etree.ElementTree as ET
 import zipfile
 
 import numpy as np
@@ -161,6 +162,19 @@ DIFFUSE_PROPERTY = {"diffuse": "reflectance", "plastic": "diffuse_reflectance",
 MIRRORS = ("conductor", "roughconductor")
 
 
+def xml_referenced_files(path: str) -> list[str]:
+    """Every file a Mitsuba scene XML names (``<string name="filename">``), resolved from its
+    folder: inputs of an import, which its output must never replace. [] when the XML cannot be
+    parsed (reading it then fails with its own message, before anything is written)."""
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError):
+        return []
+    return [os.path.join(folder, e.get("value")) for e in root.iter("string")
+            if e.get("name") == "filename" and e.get("value")]
+
+
 def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  # noqa: C901  (one check per element)
     """Per-face albedos and the radiance SH of a Mitsuba 3 scene XML, for the dataset's ``mesh``.
 
@@ -175,8 +189,6 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
     the first ``envmap`` emitter (``scale`` and the rotation
     of ``to_world`` applied) or ``constant`` emitter.
     """
-    import xml.etree.ElementTree as ET
-
     folder = os.path.dirname(os.path.abspath(path))
     try:
         root = ET.parse(path).getroot()

@@ -218,3 +218,21 @@ def test_mitsuba_xml_import_errors(stock_export, tmp_path, capsys, text, needle)
     assert main(["import", str(folder), "--from", "mitsuba-xml", "--file", str(tmp_path / "scene.xml"),
                  "-o", str(tmp_path / "run")]) == 2
     assert needle in capsys.readouterr().err and not (tmp_path / "run").exists()
+
+
+def test_import_never_overwrites_the_files_its_xml_names(stock_export, tmp_path, capsys):
+    """``import --from mitsuba-xml -o X --overwrite`` where X holds the mesh, textures and envmap
+    the XML names: they are inputs, so the output is refused and X stays as it was."""
+    import re
+    import shutil
+
+    _, out = stock_export
+    target = tmp_path / "export"
+    shutil.copytree(out, target)                      # a folder pseudolight wrote (it has the marker)
+    xml = (out / "test_000.xml").read_text()
+    (tmp_path / "scene.xml").write_text(re.sub(r"name=\"filename\" value=\"", 'name="filename" value="export/', xml))
+    before = sorted(p.name for p in target.iterdir())
+    assert main(["import", str(stock_export[0]), "--from", "mitsuba-xml", "--file", str(tmp_path / "scene.xml"),
+                 "-o", str(target), "--overwrite"]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+    assert sorted(p.name for p in target.iterdir()) == before
