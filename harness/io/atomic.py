@@ -8,12 +8,18 @@ Rules (``check_output``), checked before any work starts and again on writing:
 * the parent folder must be creatable and writable.
 
 Writing goes to a temporary ``.NAME.pseudolight-partial-PID-XXXX`` folder beside the output,
-renamed into place when complete; partial folders whose process is gone (killed
-by SIGKILL) are removed by the next write into the same parent.
+renamed into place when complete. The writing process holds an exclusive ``fcntl`` lock on
+the file :data:`LOCK` inside it, which the operating system releases when the process dies
+(even by SIGKILL); the next write into the same parent removes only partial folders whose
+lock it can take, so no process deletes another's live work, whatever host or PID namespace
+it runs in (on a shared file system the lock is the file system's). A partial folder without
+a lock file (an older version's) is removed only when its PID is gone on this host and it
+has not changed for :data:`UNLOCKED_STALE_S` seconds.
 """
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import os
 import re
@@ -24,6 +30,10 @@ import time
 from estimator import InputError
 
 MARKER = ".pseudolight-output"
+LOCK = ".pseudolight-lock"
+UNLOCKED_STALE_S = 60.0
+_HELD: dict[str, int] = {}   # lock file -> descriptor, held by this process (closing any descriptor
+#                              of a file would release this process's POSIX lock on it: never opened twice)
 _PARTIAL = re.compile(r"^\..+\.pseudolight-(?:partial|old)-(\d{1,9})-")
 
 
@@ -93,9 +103,51 @@ def _process_alive(pid: int) -> bool:
     return True
 
 
+def _hold_lock(folder: str) -> None:
+    """Take the exclusive lock of a partial folder for this process's lifetime (or until released)."""
+    path = os.path.join(folder, LOCK)
+    fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
+    fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    _HELD[path] = fd
+
+
+def _release_lock(folder: str) -> None:
+    """Give up a partial folder's lock and remove its lock file (before the folder is published)."""
+    path = os.path.join(folder, LOCK)
+    fd = _HELD.pop(path, None)
+    if fd is not None:
+        os.close(fd)
+    with contextlib.suppress(FileNotFoundError):
+        os.remove(path)
+
+
+def _owner_alive(folder: str, pid: int) -> bool:
+    """Whether the process that writes ``folder`` still runs: it holds the folder's lock."""
+    path = os.path.join(folder, LOCK)
+    if path in _HELD:
+        return True
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except FileNotFoundError:   # no lock (yet, or an older version's folder): PID and age decide
+        try:
+            recent = time.time() - os.stat(folder).st_mtime < UNLOCKED_STALE_S
+        except OSError:
+            return False
+        return recent or _process_alive(pid)
+    except OSError:
+        return True   # when in doubt, keep the folder
+    try:
+        fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True   # its writer holds the lock
+    finally:
+        os.close(fd)  # releases the lock this check took
+    return False
+
+
 def remove_stale_partials(parent: str) -> list[str]:
     """Remove ``.NAME.pseudolight-partial-PID-*`` / ``.NAME.pseudolight-old-PID-*`` folders in
-    ``parent`` whose process no longer runs (only names this module makes); returns them."""
+    ``parent`` whose writer is gone (only names this module makes); returns them."""
     removed = []
     try:
         names = os.listdir(parent)
@@ -103,9 +155,10 @@ def remove_stale_partials(parent: str) -> list[str]:
         return removed
     for name in names:
         match = _PARTIAL.match(name)
-        if match and int(match.group(1)) != os.getpid() and not _process_alive(int(match.group(1))):
-            shutil.rmtree(os.path.join(parent, name), ignore_errors=True)
-            removed.append(os.path.join(parent, name))
+        folder = os.path.join(parent, name)
+        if match and not _owner_alive(folder, int(match.group(1))):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
     return removed
 
 
@@ -126,6 +179,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
         os.makedirs(parent, exist_ok=True)
         remove_stale_partials(parent)
         tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.pseudolight-partial-{os.getpid()}-", dir=parent)
+        _hold_lock(tmp)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the output is an ordinary folder
@@ -136,6 +190,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
             yield tmp
             with open(os.path.join(tmp, MARKER), "w") as f:
                 json.dump({"kind": kind, "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid()}, f)
+            _release_lock(tmp)
             if os.path.exists(path):
                 if not overwrite:  # another process wrote it meanwhile
                     raise OutputExistsError(f"{path} appeared while this output was being written")
@@ -155,5 +210,6 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
                 raise type(exc)(message.replace(tmp, path)) from None
             raise
     except BaseException:
+        _release_lock(tmp)
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -105,6 +105,11 @@ def write_dataset(folder: str, mesh: TriangleMesh, views: list[tuple[Camera, np.
     }
     with open(os.path.join(folder, "transforms.json"), "w") as f:
         json.dump(transforms, f, indent=1)
+    missing = [path for frame in frames + test_frames for path in (frame["file_path"], frame.get("hdr_file_path"))
+               if path and not os.path.isfile(os.path.join(folder, path))]
+    if missing:   # complete by construction: never published with a frame short
+        raise OSError(f"{len(missing)} of the {len(frames) + len(test_frames)} frames' images vanished while the "
+                      f"dataset was written ({', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''})")
 
 
 def write_ground_truth(folder: str, truth: GroundTruth, envmap: np.ndarray | None = None,

@@ -337,8 +337,44 @@ def test_stale_partial_folders_are_removed(copy, tmp_path, capsys):
     odd.mkdir()
     stale.mkdir()
     (stale / "estimate.npz").write_bytes(b"half")
+    old = time.time() - 120                          # an older version's folder: no lock, unchanged for 2 min
+    os.utime(stale, (old, old))
     assert main(["estimate", str(ds), "-o", str(tmp_path / "r")]) == 0
     assert not stale.exists() and (user / "file").read_text() == "keep" and odd.exists()
+    capsys.readouterr()
+
+
+LOCK_HOLDER = """
+import fcntl, os, sys, time
+fd = os.open(sys.argv[1], os.O_CREAT | os.O_RDWR)
+fcntl.lockf(fd, fcntl.LOCK_EX)
+print("locked", flush=True)
+time.sleep(float(sys.argv[2]))
+"""
+
+
+def test_a_live_partial_folder_of_another_namespace_is_kept_and_a_dead_ones_removed(copy, tmp_path, capsys):
+    """The writer's lock decides, not its PID: a folder named with a PID this host does not run
+    (another container or host) but locked by a live process stays; a locked folder whose
+    writer died (the OS released its lock) goes, however new."""
+    ds, _, _ = copy
+    live = tmp_path / ".r.pseudolight-partial-4000000-live"
+    gone = tmp_path / ".r.pseudolight-partial-4000001-gone"
+    for folder in (live, gone):
+        folder.mkdir()
+        (folder / "images").mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", LOCK_HOLDER, str(live / ".pseudolight-lock"), "60"],
+                              stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "locked"
+    dead = subprocess.Popen([sys.executable, "-c", LOCK_HOLDER, str(gone / ".pseudolight-lock"), "0"],
+                            stdout=subprocess.PIPE, text=True)
+    dead.wait()
+    try:
+        assert main(["estimate", str(ds), "-o", str(tmp_path / "r")]) == 0
+        assert live.exists() and not gone.exists()
+    finally:
+        holder.kill()
+        holder.wait()
     capsys.readouterr()
 
 
@@ -490,3 +526,21 @@ def test_the_shadow_function_is_refused_when_it_would_not_fit(monkeypatch):
     monkeypatch.setattr(visibility, "MAX_SHADOW_BYTES", 10)    # one face x 200 directions: 25 bytes
     with pytest.raises(InputError, match="lower directions"):
         compute_visibility(RayCaster(mesh), sphere_sampling(200))
+
+
+def test_a_dataset_missing_a_frame_is_never_published(tmp_path, capsys, monkeypatch):
+    """A frame's image that vanishes while the dataset is written (another process's clean-up, a
+    full disk) fails the write: nothing is published, one line names the output."""
+    from harness.io import dataset
+
+    write = dataset.write_exr
+
+    def lose_one(path, *args, **kwargs):
+        write(path, *args, **kwargs)
+        if path.endswith("train_002.exr"):
+            os.remove(path)
+
+    monkeypatch.setattr(dataset, "write_exr", lose_one)
+    out = tmp_path / "ds"
+    expect_error(capsys, ["generate", MICRO, "-o", out], "images vanished", absent=[out])
+    assert not [n for n in os.listdir(tmp_path) if "-partial-" in n]
