@@ -206,7 +206,8 @@ def cmd_report(args) -> int:
         _check_json_target(args.write_baseline, inputs)
     baseline = _load_baseline(args.baseline)
     metrics, regressions = build_report(args.run, args.output, dataset, rotation, args.cross_check_spp,
-                                        not args.no_mitsuba, baseline, args.overwrite, log=_err)
+                                        not args.no_mitsuba, baseline, args.overwrite, log=_err,
+                                        check_fingerprint=not args.no_fingerprint_check)
     if args.write_baseline:
         from reports.regression import make_baseline
 
@@ -377,7 +378,8 @@ def cmd_render(args) -> int:
     from harness.io.exr import write_exr
 
     rotation = _rotation("--rotate-illumination", args.rotate_illumination)
-    est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite)
+    est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite,
+                                  check_fingerprint=not args.no_fingerprint_check)
     views = {"test": ds.data.test_views, "train": ds.data.views,
              "all": ds.data.views + ds.data.test_views}[args.frames]
     if not views:
@@ -399,7 +401,8 @@ def cmd_export_texture(args) -> int:
     from harness.io.mesh import load_mesh_with_uv
     from harness.io.texture import export_textures
 
-    est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite, load_test=False)
+    est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite, load_test=False,
+                                  check_fingerprint=not args.no_fingerprint_check)
     _, uv = load_mesh_with_uv(os.path.join(ds.path, ds.meta.get("mesh_file_path", "mesh.ply")))
     with atomic_directory(args.output, overwrite=args.overwrite, inputs=inputs, kind="texture") as tmp:
         summary = export_textures(tmp, ds.data.mesh, est, uv, args.size)
@@ -575,6 +578,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--rotate-illumination", nargs=2, metavar=("AXIS", "DEG"),
                    help="turn the pseudo illumination about x, y or z by DEG degrees")
     r.add_argument("--overwrite", action="store_true")
+    r.add_argument("--no-fingerprint-check", action="store_true",
+                    help="read a run against a dataset its fingerprint does not name (or a run without one)")
     r.set_defaults(func=cmd_render)
 
     rp = sub.add_parser("report", help="compare a run with its dataset's ground truth: metrics, figures, HTML")
@@ -589,6 +594,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="spp of the Mitsuba re-render (default 64; 512 for --specular-model lobe)")
     rp.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba re-render cross-check")
     rp.add_argument("--overwrite", action="store_true")
+    rp.add_argument("--no-fingerprint-check", action="store_true",
+                    help="read a run against a dataset its fingerprint does not name (or a run without one)")
     rp.set_defaults(func=cmd_report)
 
     cp = sub.add_parser("compare", help="one table and overlaid histograms over several reports")
@@ -621,6 +628,8 @@ def build_parser() -> argparse.ArgumentParser:
     tx.add_argument("-o", "--output", required=True, help="folder to create")
     tx.add_argument("--size", type=_int_at_least(16), default=1024, help="texture width and height (default 1024)")
     tx.add_argument("--overwrite", action="store_true")
+    tx.add_argument("--no-fingerprint-check", action="store_true",
+                    help="read a run against a dataset its fingerprint does not name (or a run without one)")
     tx.set_defaults(func=cmd_export_texture)
 
     ex = sub.add_parser("export", help="a dataset in another tool's layout (nerf-synthetic, or stock Mitsuba "

@@ -30,10 +30,13 @@ from reports.selfcheck import self_check
 
 
 def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: bool, load_test: bool = True,
-             load_truth: bool = False):
+             load_truth: bool = False, match: tuple[str, ...] = ("mesh",), check_fingerprint: bool = True):
     """(estimate, run.json, dataset, inputs) of a run and the dataset it is read against
     (default: the one it was made from), after checking that ``out_dir`` touches none of
-    their files and that the run's faces are the mesh's."""
+    their files and that the run was estimated from this dataset's ``match`` (of the run's
+    fingerprint: 'mesh', 'cameras', 'images'; a mesh with the same face count but another face
+    order would put each albedo on the wrong face). A run without a fingerprint is refused
+    unless ``check_fingerprint`` is False (``--no-fingerprint-check``)."""
     est, run = read_run(run_dir)
     dataset_dir = dataset_dir or run["dataset"]
     check_output(out_dir, [run_dir, dataset_dir], overwrite)
@@ -43,12 +46,23 @@ def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: boo
     if ds.data.mesh.num_faces != est.diffuse.shape[0]:
         raise InputError(f"the run {run_dir} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
                          f"{ds.data.mesh.num_faces}")
+    if check_fingerprint:
+        recorded = run.get("fingerprint")
+        if not isinstance(recorded, dict):
+            raise InputError(f"the run {run_dir} records no fingerprint of the dataset it was estimated from, so "
+                             f"nothing shows that {ds.path} is that dataset; pass --no-fingerprint-check to read "
+                             "it against this dataset anyway")
+        current = fingerprint(ds.data)
+        differ = [k for k in match if recorded.get(k) != current[k]]
+        if differ:
+            raise InputError(f"the run {run_dir} was estimated from {run['dataset']}, whose {', '.join(differ)} "
+                             f"differ from those of {ds.path}: use it with its own dataset")
     return est, run, ds, inputs
 
 
 def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rotation=("y", 90.0),
                  cross_check_spp: int | None = None, mitsuba: bool = True, baseline: dict | None = None,
-                 overwrite: bool = False, log=print) -> tuple[dict, list[dict] | None]:
+                 overwrite: bool = False, log=print, check_fingerprint: bool = True) -> tuple[dict, list[dict] | None]:
     """Evaluate a run against its dataset's ground truth and write the report folder.
 
     ``cross_check_spp`` defaults to 64 (512 for a radiance model, whose Phong-lobe
@@ -57,14 +71,8 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     Returns (metrics, regression rows or None).
     """
     t0 = time.perf_counter()
-    est, run, ds, inputs = open_run(run_dir, dataset_dir, out_dir, overwrite, load_truth=True)
-    recorded = run.get("fingerprint")
-    if isinstance(recorded, dict):
-        current = fingerprint(ds.data)
-        differ = [k for k in ("mesh", "cameras", "images") if recorded.get(k) != current[k]]
-        if differ:
-            raise InputError(f"the run {run_dir} was estimated from {run['dataset']}, whose {', '.join(differ)} "
-                             f"differ from those of {ds.path}: report it against its own dataset")
+    est, run, ds, inputs = open_run(run_dir, dataset_dir, out_dir, overwrite, load_truth=True,
+                                    match=("mesh", "cameras", "images"), check_fingerprint=check_fingerprint)
     mesh = ds.data.mesh
     predictor = Predictor(mesh, est)
     check_metrics, check_figures = self_check(predictor, ds.data.views, run, est)

@@ -151,6 +151,35 @@ def test_report_against_another_dataset_is_refused(copy, tmp_path, capsys):
                  str(other), inputs=[run, other], absent=[out])
 
 
+@pytest.mark.parametrize("command", [["render"], ["export-texture"], ["report", "--no-mitsuba"]])
+def test_a_mesh_with_its_faces_reordered_is_refused_by_every_reader_of_a_run(copy, tmp_path, capsys, command):
+    """Same face count, another face order: each albedo would land on the wrong face."""
+    from harness.io.mesh import load_mesh_file, save_mesh_ply
+
+    ds, run, _ = copy
+    other = tmp_path / "reordered"
+    shutil.copytree(ds, other)
+    mesh = load_mesh_file(str(other / "mesh.ply"))
+    save_mesh_ply(type(mesh)(mesh.vertices, mesh.faces[::-1]), str(other / "mesh.ply"))
+    out = tmp_path / "out"
+    expect_error(capsys, [command[0], run, "--dataset", other, "-o", out, *command[1:]], "mesh", "differ",
+                 inputs=[run, other], absent=[out])
+
+
+def test_a_run_without_a_fingerprint_needs_the_flag(copy, tmp_path, capsys):
+    ds, run, _ = copy
+    bare = tmp_path / "bare-run"
+    shutil.copytree(run, bare)
+    record = json.loads((bare / "run.json").read_text())
+    del record["fingerprint"]
+    (bare / "run.json").write_text(json.dumps(record))
+    out = tmp_path / "tex"
+    expect_error(capsys, ["export-texture", bare, "-o", out], "no fingerprint", "--no-fingerprint-check",
+                 inputs=[bare, ds], absent=[out])
+    assert main(["export-texture", str(bare), "-o", str(out), "--no-fingerprint-check", "--size", "64"]) == 0
+    capsys.readouterr()
+
+
 def test_nan_ground_truth_is_refused(copy, capsys):
     ds, run, _ = copy
     mats = dict(np.load(ds / "ground_truth" / "materials.npz"))
