@@ -13,12 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image
 
-from estimator import Camera, InputError, MultiViewData, TriangleMesh, View
+from estimator import Camera, InputError, MultiViewData, TriangleMesh, View, backend
 from harness.io.exr import read_exr, write_exr
 from harness.io.jsonio import load_json
 from harness.io.mesh import load_mesh_file, save_mesh_ply
 from reports.ground_truth import GroundTruth
-from reports.metrics import srgb_decode
 
 FORMAT_NAME = "pseudolight-dataset"
 FORMAT_VERSION = 2  # 2: ground_truth/illumination_sh.npz names its array radiance_sh (1: sh)
@@ -178,20 +177,21 @@ LDR_FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
 
 
 def read_frame_image(path: str) -> np.ndarray:
-    """A frame's image as float32 (H, W, 3 or 4): EXR as stored (linear); an 8-bit PNG or
-    JPEG as sRGB-encoded, linearised to [0, 1] (alpha linear)."""
+    """A frame's image as float32 (H, W, 3 or 4): EXR as stored (linear); a PNG (8 or 16 bits
+    per channel) or JPEG as sRGB-encoded, linearised to [0, 1] (alpha linear). Mitsuba's
+    bitmap reader keeps a 16-bit PNG's depth (Pillow reduces 16-bit RGB to 8 bits and 16-bit
+    grey to 0/1 when converting it)."""
     if os.path.splitext(path)[1].lower() not in LDR_FRAME_EXTENSIONS:
         return read_exr(path)
+    mi = backend.set_variant()
     try:
-        with Image.open(path) as im:
-            im = im.convert("RGBA" if im.mode in ("RGBA", "LA", "PA") or "transparency" in im.info else "RGB")
-            raw = np.asarray(im, dtype=np.float64) / 255.0
-    except (OSError, ValueError) as exc:
+        bitmap = mi.Bitmap(path)
+    except Exception as exc:   # Mitsuba raises RuntimeError for unreadable or truncated files
         raise DatasetError(f"cannot read image {path}: {exc}") from None
-    out = srgb_decode(raw)
-    if raw.shape[2] == 4:
-        out[..., 3] = raw[..., 3]
-    return out.astype(np.float32)
+    formats = mi.Bitmap.PixelFormat
+    alpha = bitmap.pixel_format() in (formats.RGBA, formats.YA)
+    linear = bitmap.convert(formats.RGBA if alpha else formats.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+    return np.array(linear, dtype=np.float32)
 
 
 def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[View]:

@@ -130,3 +130,23 @@ def test_generated_tiny_dataset_is_complete(tiny_earth):
     assert gt.sh_order >= 10 and len(gt.illumination["lights"]) == 40
     coverage = np.mean([v.alpha.mean() for v in ds.data.views])
     assert 0.2 < coverage < 0.8
+
+
+def test_16_bit_png_frames_keep_their_depth(tmp_path):
+    """16-bit PNG frames are read as 16-bit (Pillow's conversion turned grey ones into 0/1 masks
+    and RGB ones into 8 bits), sRGB-decoded as 8-bit ones are."""
+    import mitsuba as mi
+
+    from estimator import backend
+    from harness.io.dataset import read_frame_image
+    from reports.metrics import srgb_decode
+
+    backend.set_variant()
+    ramp = np.linspace(0, 65535, 32 * 32 * 3).reshape(32, 32, 3).astype(np.uint16)
+    mi.Bitmap(ramp, pixel_format=mi.Bitmap.PixelFormat.RGB).write(str(tmp_path / "rgb16.png"))
+    mi.Bitmap(ramp[..., 0], pixel_format=mi.Bitmap.PixelFormat.Y).write(str(tmp_path / "grey16.png"))
+    rgb = read_frame_image(str(tmp_path / "rgb16.png"))
+    grey = read_frame_image(str(tmp_path / "grey16.png"))
+    np.testing.assert_allclose(rgb, srgb_decode(ramp / 65535.0), atol=1e-5)
+    np.testing.assert_allclose(grey[..., 0], srgb_decode(ramp[..., 0] / 65535.0), atol=1e-5)
+    assert len(np.unique(rgb)) > 2000          # not 256 levels, not a mask
