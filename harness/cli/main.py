@@ -228,7 +228,8 @@ def cmd_compare(args) -> int:
 
 def cmd_suite(args) -> int:
     from harness.cli.reporting import print_table
-    from harness.sweep.runner import run_sweep
+    from harness.sweep.executor import probe_scheduler
+    from harness.sweep.runner import claim_sweep_folder, run_sweep
     from harness.sweep.suite import load_suite
     from reports.sweep import read_rows
 
@@ -237,6 +238,9 @@ def cmd_suite(args) -> int:
     suite = load_suite(args.suite, args.profile)
     baseline = read_rows(args.baseline) if args.baseline else None   # read before the sweep may replace it
     check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
+    if args.executor == "dask" and args.scheduler and args.scheduler.startswith("tcp://"):
+        probe_scheduler(args.scheduler)   # before anything is written
+    claim_sweep_folder(args.output)
     summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
                         not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline)
     print_table([{**r, "scene": f"{r['scene']} {json.dumps(r['axes']) if r['axes'] else ''}".strip(),

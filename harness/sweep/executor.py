@@ -89,7 +89,7 @@ def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "loca
 SCHEDULER_PROBE_S = 5.0   # a Dask scheduler sends its handshake at once; a listener that does not speak Dask, never
 
 
-def _probe_scheduler(address: str, timeout: float = SCHEDULER_PROBE_S) -> None:
+def probe_scheduler(address: str, timeout: float = SCHEDULER_PROBE_S) -> None:
     """Refuse an address that does not answer like a Dask scheduler: connect and wait up to
     ``timeout`` seconds for the first bytes of its handshake (``dask.distributed.Client`` waits
     forever on a port that accepts but stays silent, such as a bare listener or the dashboard)."""
@@ -115,7 +115,7 @@ def _dask(fn, jobs, scheduler):
     if scheduler is None:
         raise InputError("--executor dask needs --scheduler tcp://HOST:PORT")
     if isinstance(scheduler, str) and scheduler.startswith("tcp://"):
-        _probe_scheduler(scheduler)
+        probe_scheduler(scheduler)
     try:
         client = Client(scheduler, timeout="10s")
     except (OSError, ValueError, TimeoutError) as exc:

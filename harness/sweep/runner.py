@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 from estimator import InputError, backend
 from harness.cli.reporting import compare_runs
+from harness.io.atomic import OutputError
 from harness.sweep.executor import run_jobs, worker_threads
 from harness.sweep.jobs import dataset_job, dataset_payload, identity, run_job
 from reports import sweep as sweep_report
@@ -68,6 +69,27 @@ def _execute(fn, jobs, what, executor, workers, scheduler, log, gpus=0) -> dict[
         raise InputError(f"{len(failed)} {what} job(s) failed: {', '.join(failed[:5])}; finished jobs are kept, "
                          "run the suite again to resume")
     return results
+
+
+SWEEP_MARKER = ".pseudolight-sweep"   # a sweep folder: its cache of jobs may be resumed and its files replaced
+
+
+def claim_sweep_folder(out_dir: str) -> None:
+    """Make ``out_dir`` a sweep folder, or refuse it: it must be new, empty, or a sweep folder
+    already (it holds :data:`SWEEP_MARKER`); a folder of the user's is never written into."""
+    root = os.path.abspath(out_dir)
+    if os.path.lexists(root):
+        if not os.path.isdir(root) or os.path.islink(root):
+            raise OutputError(f"sweep output {root} exists and is not a folder")
+        if os.listdir(root) and not os.path.exists(os.path.join(root, SWEEP_MARKER)):
+            raise OutputError(f"refusing to write the sweep into {root}: it is not empty and was not made by "
+                              f"pseudolight bench (no {SWEEP_MARKER}); choose another -o")
+    try:
+        os.makedirs(root, exist_ok=True)
+        with open(os.path.join(root, SWEEP_MARKER), "w") as f:
+            f.write("pseudolight sweep folder: cached jobs, runs, reports and the comparison\n")
+    except OSError as exc:
+        raise OutputError(f"cannot write the sweep into {root}: {exc.strerror or exc}") from None
 
 
 def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int = 1, scheduler: str | None = None,

@@ -209,9 +209,18 @@ def test_a_port_that_does_not_speak_dask_is_refused_not_waited_on(silent_listene
     from harness.sweep import executor
 
     with pytest.raises(InputError, match="no Dask handshake"):
-        executor._probe_scheduler(silent_listener, timeout=0.3)
+        executor.probe_scheduler(silent_listener, timeout=0.3)
     assert main(["bench", "smoke", "-o", str(tmp_path / "b"), "--executor", "dask",
                  "--scheduler", silent_listener]) == 2
     err = capsys.readouterr().err
     assert "no Dask handshake" in err and "Traceback" not in err
     assert not (tmp_path / "b").exists()
+
+
+def test_bench_never_writes_into_a_folder_of_the_users(tmp_path, capsys):
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "sweep-summary.json").write_text("my notes")
+    assert main(["bench", "smoke", "-o", str(user), "--profile", "tiny"]) == 2
+    assert "not made by pseudolight bench" in capsys.readouterr().err
+    assert (user / "sweep-summary.json").read_text() == "my notes" and len(list(user.iterdir())) == 1
