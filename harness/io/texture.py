@@ -81,6 +81,9 @@ def srgb8(linear: np.ndarray) -> np.ndarray:
     return np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
 
 
+MAX_SIZE = 8192   # two float32 RGB maps of 8192^2 and their 8-bit copies: about 2 GiB at the peak
+
+
 def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarray | None = None,
                     size: int = 1024) -> dict:
     """Write the estimate's texture maps, meshes and light into ``folder`` (which must exist).
@@ -89,16 +92,22 @@ def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarr
     ``mesh.glb``, ``radiance.exr`` and ``texture.json`` (scales and counts). The PNGs are
     8-bit sRGB of the albedo times ``png_scale`` (so the brightest 0.5 % saturate at most:
     the estimate's albedo is in the light's unit-DC gauge, not bounded by 1); the EXRs are
-    the linear albedo itself. Unestimated faces are black.
+    the linear albedo itself. Unestimated faces are black. The mesh's own UVs are used when
+    they lie in [0, 1]; otherwise (UDIM tiles, tiling) the mesh is unwrapped with xatlas, as
+    one texture cannot hold several tiles.
     """
     import trimesh
     from PIL import Image
 
-    if size < 16 or size > 16384:
-        raise InputError(f"--size must lie in [16, 16384], got {size}")
+    if size < 16 or size > MAX_SIZE:
+        raise InputError(f"--size must lie in [16, {MAX_SIZE}], got {size}")
+    source = "mesh" if uv is not None else "xatlas"
+    if uv is not None and not (np.all(np.isfinite(uv)) and uv.min() >= 0.0 and uv.max() <= 1.0):
+        # UDIM tiles or tiling UVs would overlap in one [0, 1] texture: unwrap instead
+        uv, source = None, "xatlas (the mesh's own UVs leave [0, 1]: UDIM tiles or tiling)"
     vertices, faces, uvs = uv_atlas(mesh, uv)
     summary = {"faces": int(len(faces)), "vertices": int(len(vertices)), "size": int(size),
-               "uv_source": "mesh" if uv is not None else "xatlas", "png_scale": {}}
+               "uv_source": source, "png_scale": {}}
     images = {}
     for name in ("diffuse", "specular"):
         values = np.where(est.observed[:, None], getattr(est, name), 0.0)

@@ -52,3 +52,26 @@ def test_export_texture_command(micro, tmp_path):  # noqa: F811
     obj = trimesh.load(out / "mesh.obj", force="mesh", process=False)
     assert len(obj.faces) == 80
     assert os.path.isfile(out / "radiance.exr") and os.path.isfile(out / "material.mtl")
+
+
+def test_uvs_outside_the_unit_square_are_unwrapped_not_clamped(tmp_path):
+    """A mesh whose own UVs lie on a UDIM tile (u in [1, 2]) cannot share one [0, 1] texture:
+    the export unwraps it instead, and every face reads its own albedo back."""
+    from estimator import Estimate, EstimatorConfig, TriangleMesh
+    from harness.io.texture import export_textures
+
+    mesh = icosphere(2)
+    _, _, unit = uv_atlas(mesh)                    # per corner in xatlas's vertex order
+    vertices, faces, _ = uv_atlas(mesh)
+    f = mesh.num_faces
+    values = np.random.default_rng(1).random((f, 3))
+    est = Estimate(values, np.zeros((f, 3)), np.eye(9, 3), np.arange(f), np.ones(f, bool), "t", EstimatorConfig())
+    split = TriangleMesh(vertices, faces)          # vertices split along the seams: one UV per vertex
+    summary = export_textures(str(tmp_path), split, est, unit + [1.0, 0.0], size=512)
+    assert summary["uv_source"].startswith("xatlas")
+    glb = trimesh.load(tmp_path / "mesh.glb", force="mesh", process=False)
+    uv = np.asarray(glb.visual.uv)
+    assert uv.min() >= 0 and uv.max() <= 1
+    with OpenEXR.File(str(tmp_path / "diffuse.exr")) as exr:
+        texture = np.asarray(exr.channels()["RGB"].pixels)
+    np.testing.assert_allclose(sample(texture, uv[np.asarray(glb.faces)].mean(axis=1)), values, rtol=1e-6)
