@@ -573,3 +573,25 @@ def test_a_dataset_missing_a_frame_is_never_published(tmp_path, capsys, monkeypa
     out = tmp_path / "ds"
     expect_error(capsys, ["generate", MICRO, "-o", out], "images vanished", absent=[out])
     assert not [n for n in os.listdir(tmp_path) if "-partial-" in n]
+
+
+def test_nerf_synthetic_export_refuses_frames_with_their_own_intrinsics(copy, tmp_path, capsys):
+    """The layout holds one camera: a frame with another focal length is refused (it was written
+    with the first frame's), not exported wrong."""
+    ds, _, _ = copy
+    other = tmp_path / "per-frame"
+    shutil.copytree(ds, other)
+    record = json.loads((other / "transforms.json").read_text())
+    record["frames"][1]["fl_x"] = record["fl_x"] * 1.2
+    (other / "transforms.json").write_text(json.dumps(record))
+    out = tmp_path / "nerf"
+    expect_error(capsys, ["export", other, "--format", "nerf-synthetic", "-o", out], "train_001",
+                 "--format mitsuba", inputs=[other], absent=[out])
+
+
+def test_nerf_synthetic_export_writes_train_val_and_test(copy, tmp_path):
+    ds, _, _ = copy
+    out = tmp_path / "nerf"
+    assert main(["export", str(ds), "--format", "nerf-synthetic", "-o", str(out), "--size", "64"]) == 0
+    val = json.loads((out / "transforms_val.json").read_text())
+    assert val == json.loads((out / "transforms_test.json").read_text()) and val["frames"]
