@@ -120,6 +120,23 @@ def face_values_from_texture(mesh: TriangleMesh, textured: TriangleMesh, uv: np.
     return sample_uv(texture, uv[textured.faces[closest]].mean(axis=1), nearest)
 
 
+MAX_OFFSET = 0.1   # share of the object's bounding diagonal: farther, the textured mesh is somewhere else
+
+
+def check_overlap(mesh: TriangleMesh, textured: TriangleMesh, path: str) -> None:
+    """Refuse a textured mesh that does not lie on the dataset's: the median distance from a
+    face's centroid to the nearest of its centroids must be within :data:`MAX_OFFSET` of the
+    object's size (another tessellation of the same surface stays within a face's size)."""
+    from scipy.spatial import cKDTree
+
+    diagonal = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    offset = float(np.median(cKDTree(textured.centroids).query(mesh.centroids)[0]))
+    if offset > MAX_OFFSET * diagonal:
+        raise InputError(f"{path}: the textured mesh does not lie on the dataset's mesh (its faces are a median "
+                         f"{offset:.3g} away, {100 * offset / max(diagonal, 1e-300):.0f} % of the object's size); "
+                         "check its scale, placement and axes")
+
+
 def _texture_faces(mesh: TriangleMesh, textured: TriangleMesh, uv: np.ndarray, path: str, raw: bool = False,
                    nearest: bool = False) -> np.ndarray:
     values = face_values_from_texture(mesh, textured, uv, read_linear_rgb(path, raw), nearest)
@@ -147,6 +164,7 @@ def read_uv_textures(mesh: TriangleMesh, mesh_path: str, diffuse_path: str, spec
     textured, uv = load_mesh_with_uv(mesh_path)
     if uv is None:
         raise InputError(f"{mesh_path}: the mesh has no per-vertex texture coordinates")
+    check_overlap(mesh, textured, mesh_path)
     out = {"diffuse": None, "specular": None, "radiance_sh": None, "pseudo_sh": None}
     for key, path in (("diffuse", diffuse_path), ("specular", specular_path)):
         if path:
@@ -222,6 +240,7 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
     matrix = _xml_matrix(shape, path)
     if matrix is not None:
         textured = TriangleMesh(textured.vertices @ matrix[:3, :3].T + matrix[:3, 3], textured.faces)
+    check_overlap(mesh, textured, os.path.join(folder, filename))
     bsdf = child_bsdf(shape)
     parts = {"diffuse": np.zeros((mesh.num_faces, 3)), "specular": np.zeros((mesh.num_faces, 3))}
 

@@ -112,6 +112,21 @@ def test_uv_textures_on_another_mesh_take_the_nearest_face(tiny_earth, exported,
     assert np.median(ratio / np.median(ratio)) == pytest.approx(1.0, abs=0.02)
 
 
+def test_uv_textures_on_a_mesh_elsewhere_are_refused(tiny_earth, exported, tmp_path, capsys):
+    """A textured mesh that does not lie on the dataset's (here moved by 3 object sizes) gave
+    every face one of two texels, with exit 0; now it is refused naming the mesh."""
+    import trimesh
+
+    gt = os.path.join(exported, "ground_truth")
+    other = trimesh.load(os.path.join(gt, "mesh.obj"), process=False, force="mesh")
+    moved = trimesh.Trimesh(other.vertices + [6.0, 0.0, 0.0], other.faces, process=False,
+                            visual=trimesh.visual.TextureVisuals(uv=other.visual.uv))
+    moved.export(str(tmp_path / "moved.obj"))
+    assert main(["import", tiny_earth, "--from", "uv-textures", "--mesh", str(tmp_path / "moved.obj"),
+                 "--diffuse", os.path.join(gt, "diffuse.exr"), "-o", str(tmp_path / "run")]) == 2
+    assert "does not lie on the dataset's mesh" in capsys.readouterr().err and not (tmp_path / "run").exists()
+
+
 STOCK_RENDER = """
 import sys, numpy as np, mitsuba as mi
 mi.set_variant(sys.argv[3])
