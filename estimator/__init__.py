@@ -15,7 +15,7 @@ from .core.gauge import unit_dc
 from .core.psnr import PSNR_CAP_DB, psnr_db
 from .core.sh import axis_angle_matrix, fibonacci_sphere
 from .diagnostics.trust import warnings_for
-from .diagnostics.validation import cross_validate, holdout_indices, prediction_scores
+from .diagnostics.validation import cross_validate, cross_validation_warnings, holdout_indices, prediction_scores
 from .methods import REGISTRY, Method, get_method, register_method
 from .model.estimate import Estimate
 from .model.forward import Predictor
@@ -60,6 +60,7 @@ __all__ = [
     "camera",
     "compute_visibility",
     "cross_validate",
+    "cross_validation_warnings",
     "estimate",
     "get_method",
     "gl_to_mitsuba",

@@ -77,3 +77,25 @@ def cross_validate(data: MultiViewData, k: int, solve) -> dict:
     return {"held_out": [data.views[int(i)].name for i in held], "views": scores,
             "psnr": float(np.mean(psnr)) if psnr else None,
             "relative_rmse": float(np.mean(rmse)) if rmse else None, "aligned": aligned}
+
+
+MIN_CV_PSNR_DB = 10.0    # an error of a third of the exposure level on every held-out pixel
+MAX_HELD_OUT_RMSE = 1.0  # a prediction further from its image than a black image is
+
+
+def cross_validation_warnings(cv: dict) -> list[str]:
+    """Warnings of a :func:`cross_validate` result: its mean prediction PSNR below
+    :data:`MIN_CV_PSNR_DB`, or a held-out view whose relative RMSE exceeds
+    :data:`MAX_HELD_OUT_RMSE` (the held-out solve diverged, or the model does not hold)."""
+    out = []
+    if cv.get("psnr") is not None and cv["psnr"] < MIN_CV_PSNR_DB:
+        out.append(f"cross-validation: the held-out views are predicted at {cv['psnr']:.1f} dB, below "
+                   f"{MIN_CV_PSNR_DB:g} dB: the estimate does not predict views it was not solved from")
+    bad = [v for v in cv.get("views", []) if v.get("relative_rmse") is not None
+           and v["relative_rmse"] > MAX_HELD_OUT_RMSE]
+    if bad:
+        worst = max(bad, key=lambda v: v["relative_rmse"])
+        out.append(f"cross-validation: {len(bad)} held-out view(s) predicted further from their images than a black "
+                   f"image would be (worst {worst['view']}: relative RMSE {worst['relative_rmse']:.3g}): the "
+                   "solve without them diverged")
+    return out

@@ -324,7 +324,7 @@ def cmd_estimate(args) -> int:
     say = lambda m: _err(f"  {m}")  # noqa: E731
     est = estimate(ds.data, method, config, **known, log=say, exponent_candidates=candidates)
     if args.holdout_views:
-        from estimator import cross_validate
+        from estimator import cross_validate, cross_validation_warnings
         try:
             cv = cross_validate(ds.data, args.holdout_views,
                                 lambda data: estimate(data, method, config, **known, exponent_candidates=candidates))
@@ -332,6 +332,7 @@ def cmd_estimate(args) -> int:
             cv = {"error": f"the solve without the held-out views failed: {exc}", "psnr": None, "held_out": []}
             est.info.setdefault("warnings", []).append(f"cross-validation failed: {exc}")
         est.info["cross_validation"] = cv
+        est.info.setdefault("warnings", []).extend(cross_validation_warnings(cv))
         psnr = "-" if cv["psnr"] is None else f"{cv['psnr']:.2f}"
         _err(f"  cross-validation: {len(cv['held_out'])} views held out, prediction PSNR {psnr} dB")
     _print_trust(est)

@@ -133,7 +133,29 @@ def _number(where: str, key: str, value) -> float:
     return float(value)
 
 
+DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")   # nerfstudio's OPENCV / OPENCV_FISHEYE parameters
+
+
+def _check_camera_model(where: str, frame: dict, top: dict) -> None:
+    """Only pinhole cameras without lens distortion are read: a distorted image would put each
+    pixel's colour on the wrong face. Any other model, or a non-zero distortion coefficient, is
+    refused naming the key (undistort the images first, e.g. COLMAP's image_undistorter)."""
+    model = frame.get("camera_model", top.get("camera_model", "PINHOLE"))
+    if model not in ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "OPENCV_FISHEYE"):
+        raise DatasetError(f"{where}: camera_model {model!r} is not supported (only pinhole cameras; undistort the "
+                           "images first)")
+    for key in DISTORTION_KEYS:
+        value = frame.get(key, top.get(key, 0.0))
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or value != 0:
+            raise DatasetError(f"{where}: lens distortion {key} = {value!r} ({model}) is not supported: undistort "
+                               "the images first (e.g. COLMAP's image_undistorter) and write a PINHOLE camera")
+    if model == "OPENCV_FISHEYE":
+        raise DatasetError(f"{where}: camera_model 'OPENCV_FISHEYE' is not supported (a fisheye projection is not "
+                           "a pinhole one, even without distortion coefficients)")
+
+
 def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
+    _check_camera_model(where, frame, top)
     values = {}
     for key in _INTRINSIC_KEYS:
         value = frame.get(key, top.get(key))

@@ -46,3 +46,14 @@ def test_psnr_convention():
     assert psnr_db(0.01, 1.0) == pytest.approx(20.0)
     assert psnr_db(1.0, 10.0) == pytest.approx(20.0)          # the peak scales with the signal
     assert psnr_db(0.0, 1.0) == PSNR_CAP_DB == psnr_db(1e-12, 1.0)
+
+
+def test_cross_validation_warns_below_its_floor_and_on_a_diverged_view():
+    from estimator import cross_validation_warnings
+
+    good = {"psnr": 31.0, "views": [{"view": "a", "relative_rmse": 0.05}, {"view": "b", "relative_rmse": 0.08}]}
+    assert cross_validation_warnings(good) == []
+    diverged = {"psnr": -25.7, "views": [{"view": "a", "relative_rmse": 0.1}, {"view": "b", "relative_rmse": 1175.0}]}
+    lines = cross_validation_warnings(diverged)
+    assert len(lines) == 2 and "-25.7 dB" in lines[0] and "b" in lines[1] and "1.18e+03" in lines[1]
+    assert cross_validation_warnings({"psnr": None, "views": [], "held_out": []}) == []

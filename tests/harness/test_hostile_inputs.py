@@ -595,3 +595,31 @@ def test_nerf_synthetic_export_writes_train_val_and_test(copy, tmp_path):
     assert main(["export", str(ds), "--format", "nerf-synthetic", "-o", str(out), "--size", "64"]) == 0
     val = json.loads((out / "transforms_val.json").read_text())
     assert val == json.loads((out / "transforms_test.json").read_text()) and val["frames"]
+
+
+@pytest.mark.parametrize("keys, needle", [
+    ({"camera_model": "OPENCV", "k1": 0.2}, "lens distortion k1 = 0.2"),
+    ({"camera_model": "OPENCV", "p2": -0.01}, "lens distortion p2"),
+    ({"camera_model": "OPENCV_FISHEYE"}, "OPENCV_FISHEYE"),
+    ({"camera_model": "EQUIRECTANGULAR"}, "camera_model 'EQUIRECTANGULAR' is not supported"),
+])
+def test_lens_distortion_and_other_camera_models_are_refused(copy, tmp_path, capsys, keys, needle):
+    """A real capture's transforms.json with distortion was estimated without a word."""
+    ds, _, _ = copy
+    other = tmp_path / "distorted"
+    shutil.copytree(ds, other)
+    record = json.loads((other / "transforms.json").read_text())
+    record.update(keys)
+    (other / "transforms.json").write_text(json.dumps(record))
+    expect_error(capsys, ["estimate", other, "-o", tmp_path / "r"], needle, "transforms.json", inputs=[other],
+                 absent=[tmp_path / "r"])
+
+
+def test_an_undistorted_opencv_camera_is_a_pinhole(copy, tmp_path):
+    ds, _, _ = copy
+    other = tmp_path / "opencv"
+    shutil.copytree(ds, other)
+    record = json.loads((other / "transforms.json").read_text())
+    record.update({"camera_model": "OPENCV", "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0})
+    (other / "transforms.json").write_text(json.dumps(record))
+    assert main(["estimate", str(other), "-o", str(tmp_path / "r")]) == 0
