@@ -167,7 +167,7 @@ def warnings_for(est: Estimate) -> list[str]:
     for v in bad:
         out.append(f"outlier view {v['view']}: {100 * v['gross_share']:.1f} % of its observations are off by over "
                    f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level (typical view {100 * typical:.1f} %): glare, "
-                   "an occluder or a wrong pose? (pose_rounds / --refine-poses 2 corrects poses)")
+                   "an occluder or a wrong pose? (pose refinement, pose_rounds, corrects poses)")
     median = trust["residual"]["median_relative"]
     if median is not None and median > HIGH_RESIDUAL:
         out.append(f"high residual: the estimate re-predicts its observations with a median relative error of "

@@ -15,10 +15,11 @@ from ..pipeline.pose import plausible, refine_view
 def holdout_indices(num_views: int, k: int) -> np.ndarray:
     """(k,) indices of ``k`` views spread evenly over ``num_views`` (at least 2 views stay in)."""
     if num_views < 3:
-        raise InputError(f"--holdout-views needs at least 3 training views (2 stay in the solve), the dataset has "
+        raise InputError(f"holding views out needs at least 3 training views (2 stay in the solve), the dataset has "
                          f"{num_views}")
     if not 1 <= k <= num_views - 2:
-        raise InputError(f"--holdout-views must lie in [1, {num_views - 2}] for {num_views} views, got {k}")
+        raise InputError(f"the number of held-out views must lie in [1, {num_views - 2}] for {num_views} views, "
+                         f"got {k}")
     return np.unique(np.round(np.linspace(0, num_views - 1, k + 2)[1:-1]).astype(np.int64))
 
 

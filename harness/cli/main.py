@@ -320,7 +320,10 @@ def cmd_estimate(args) -> int:
         known = truth.known_light()
     if args.holdout_views:
         from estimator import holdout_indices
-        holdout_indices(len(ds.data.views), args.holdout_views)   # refuse a bad count before solving
+        try:
+            holdout_indices(len(ds.data.views), args.holdout_views)   # refuse a bad count before solving
+        except InputError as exc:
+            raise InputError(f"--holdout-views: {exc}") from None
     say = lambda m: _err(f"  {m}")  # noqa: E731
     est = estimate(ds.data, method, config, **known, log=say, exponent_candidates=candidates)
     if args.holdout_views:

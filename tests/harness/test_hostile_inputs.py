@@ -502,7 +502,7 @@ def test_holdout_views_and_trust_are_recorded_and_read_back(tmp_path, capsys):
     assert len(meta["trust"]["views"]) == 6 and "degrees_of_freedom" in meta
     assert est.face_stats["observations"].shape == (80,) and est.face_stats["albedo_se"].shape == (80, 3)
     expect_error(capsys, ["estimate", str(ds), "-o", str(tmp_path / "r2"), "--holdout-views", "5"],
-                 "--holdout-views must lie in [1, 4]")
+                 "--holdout-views: the number of held-out views must lie in [1, 4]")
 
 
 def test_report_without_ground_truth_is_the_self_check(tmp_path, capsys):
