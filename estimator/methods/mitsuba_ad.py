@@ -157,7 +157,7 @@ class MitsubaAD(Method):
                 snapshots.append(np.array(opt["object.face_albedo"], dtype=np.float64).reshape(-1, 3))
                 snapshot_seconds.append(elapsed)
                 next_snapshot += 1 / 8
-            if progress >= 1.0:
+            if progress >= 1.0 and step > 0:   # at least one step, whatever the budget
                 break
             if not refined and progress >= 0.5:
                 refined = True   # coarse to fine: the envmap at twice the resolution, same radiance

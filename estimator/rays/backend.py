@@ -109,11 +109,13 @@ def resolve_variant(variant: str | None = None) -> str:
 
     Auto picks ``cuda_ad_rgb`` when a CUDA GPU is usable, else ``llvm_ad_rgb``.
     """
-    variant = variant or os.environ.get("PSEUDOLIGHT_VARIANT") or None
-    if variant in (None, "auto"):
+    source = "variant"
+    if not variant and os.environ.get("PSEUDOLIGHT_VARIANT"):
+        variant, source = os.environ["PSEUDOLIGHT_VARIANT"], "$PSEUDOLIGHT_VARIANT"
+    if variant in (None, "", "auto"):
         return "cuda_ad_rgb" if cuda_available() else "llvm_ad_rgb"
     if variant not in VARIANTS:
-        raise BackendError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)} or 'auto'")
+        raise BackendError(f"unknown {source} {variant!r}; choose one of {', '.join(VARIANTS)} or 'auto'")
     return variant
 
 

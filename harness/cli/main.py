@@ -279,11 +279,13 @@ def _config_flags(args) -> dict:
     return {k: getattr(args, k) for k in CONFIG_FLAGS if getattr(args, k, None) is not None}
 
 
-def _positive_float(flag: str, text: str) -> float:
+def _positive_float(flag: str, text: str, auto: bool = False) -> float:
+    """A finite number > 0 given to ``flag``; ``auto``: the flag also takes 'auto' (handled
+    before this is called), which the message then names."""
     try:
         value = float(text)
     except ValueError:
-        raise InputError(f"{flag} must be a number or 'auto', got {text!r}") from None
+        raise InputError(f"{flag} must be a number{' or auto' if auto else ''}, got {text!r}") from None
     if not (math.isfinite(value) and value > 0):
         raise InputError(f"{flag} must be a finite number > 0, got {text!r}")
     return value
@@ -303,7 +305,7 @@ def cmd_estimate(args) -> int:
         flags.pop("phong_exponent")
         candidates = EXPONENT_CANDIDATES
     elif "phong_exponent" in flags:
-        flags["phong_exponent"] = _positive_float("--phong-exponent", flags["phong_exponent"])
+        flags["phong_exponent"] = _positive_float("--phong-exponent", flags["phong_exponent"], auto=True)
     method, config = estimator_settings(ds.meta, args.method, flags)
     if "ad_time_budget" in flags and method != "mitsuba-ad":
         raise InputError(f"--time-budget applies to mitsuba-ad (the iterative peer), not to {method}")
@@ -484,17 +486,21 @@ def cmd_import(args) -> int:
     return 0
 
 
-def _int_at_least(minimum: int):
-    """An argparse type: an integer >= ``minimum`` (a one-line error otherwise)."""
+def _int_at_least(minimum: int, maximum: int | None = None):
+    """An argparse type: an integer >= ``minimum`` (and <= ``maximum``; a one-line error otherwise)."""
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             value = None
-        if value is None or value < minimum:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {minimum}, got {text!r}")
+        if value is None or value < minimum or (maximum is not None and value > maximum):
+            bound = f"in [{minimum}, {maximum}]" if maximum is not None else f">= {minimum}"
+            raise argparse.ArgumentTypeError(f"must be an integer {bound}, got {text!r}")
         return value
     return parse
+
+
+MAX_JOBS = 256   # worker processes of a sweep: one per core of the largest machines
 
 
 _positive_int, _count = _int_at_least(1), _int_at_least(0)
@@ -621,8 +627,8 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba cross-check in the reports")
     su.add_argument("--force", "--overwrite", action="store_true", dest="force",
                     help="redo every job (finished jobs are otherwise reused)")
-    su.add_argument("--jobs", type=_positive_int, default=1,
-                    help="worker processes (spawned; Dr.Jit threads split between them)")
+    su.add_argument("--jobs", type=_int_at_least(1, MAX_JOBS), default=1,
+                    help=f"worker processes (spawned; Dr.Jit threads split between them), 1 to {MAX_JOBS}")
     su.add_argument("--executor", choices=("local", "dask"), default="local")
     su.add_argument("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (--executor dask)")
     su.add_argument("--variant", choices=VARIANTS)

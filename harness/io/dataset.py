@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zipfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -249,8 +250,9 @@ def _load_npz(path: str) -> dict:
             return {k: archive[k] for k in archive.files}
     except FileNotFoundError:
         raise DatasetError(f"{path} not found") from None
-    except (OSError, ValueError, EOFError) as exc:
-        reason = "not a .npz archive" if "pickle" in str(exc) or isinstance(exc, (OSError, EOFError)) else exc
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:   # a truncated archive is a BadZipFile
+        damaged = isinstance(exc, (OSError, EOFError, zipfile.BadZipFile))
+        reason = "not a .npz archive" if damaged or "pickle" in str(exc) else exc
         raise DatasetError(f"{path}: unreadable ({reason})") from None
 
 

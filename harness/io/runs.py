@@ -4,6 +4,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import platform
+import zipfile
 from importlib import metadata
 
 import numpy as np
@@ -137,7 +138,7 @@ def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check pe
     try:
         with np.load(npz, allow_pickle=False) as archive:
             data = {k: archive[k] for k in archive.files}
-    except (OSError, ValueError, EOFError):
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):   # a truncated archive is a BadZipFile
         raise RunError(f"{npz}: unreadable (not a .npz archive)") from None
     pseudo_key = "pseudo_sh" if "pseudo_sh" in data else "sh"  # run format 1 named it sh
     for key in ("diffuse", "specular", pseudo_key, "labels", "observed"):

@@ -623,3 +623,35 @@ def test_an_undistorted_opencv_camera_is_a_pinhole(copy, tmp_path):
     record.update({"camera_model": "OPENCV", "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0})
     (other / "transforms.json").write_text(json.dumps(record))
     assert main(["estimate", str(other), "-o", str(tmp_path / "r")]) == 0
+
+
+def test_truncated_archives_are_one_line_errors(copy, tmp_path, capsys):
+    """A truncated estimate.npz or materials.npz raised a BadZipFile traceback."""
+    ds, run, _ = copy
+    broken_run = tmp_path / "broken-run"
+    shutil.copytree(run, broken_run)
+    data = (broken_run / "estimate.npz").read_bytes()
+    (broken_run / "estimate.npz").write_bytes(data[: len(data) // 2])
+    expect_error(capsys, ["export-texture", broken_run, "-o", tmp_path / "t"], "estimate.npz", "unreadable",
+                 inputs=[broken_run], absent=[tmp_path / "t"])
+    broken_ds = tmp_path / "broken-ds"
+    shutil.copytree(ds, broken_ds)
+    data = (broken_ds / "ground_truth" / "materials.npz").read_bytes()
+    (broken_ds / "ground_truth" / "materials.npz").write_bytes(data[: len(data) // 3])
+    expect_error(capsys, ["report", run, "--dataset", broken_ds, "-o", tmp_path / "r", "--no-mitsuba",
+                          "--no-fingerprint-check"], "materials.npz", "unreadable", inputs=[run, broken_ds],
+                 absent=[tmp_path / "r"])
+
+
+def test_flag_messages_name_their_flag_or_variable(copy, tmp_path, capsys, monkeypatch):
+    ds, run, _ = copy
+    expect_error(capsys, ["import", ds, "--from", "per-face", "--file", run / "estimate.npz", "--exponent", "auto",
+                          "-o", tmp_path / "i"], "--exponent must be a number, got 'auto'", inputs=[ds])
+    expect_error(capsys, ["bench", "smoke", "-o", tmp_path / "b", "--jobs", "100000"], "--jobs", "[1, 256]",
+                 absent=[tmp_path / "b"])
+    monkeypatch.setenv("PSEUDOLIGHT_VARIANT", "bogus")
+    from estimator import InputError
+    from estimator.rays import backend
+
+    with pytest.raises(InputError, match=r"\$PSEUDOLIGHT_VARIANT 'bogus'"):
+        backend.resolve_variant()

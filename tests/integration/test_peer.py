@@ -58,3 +58,11 @@ def test_mitsuba_ad_runs_its_steps_and_fits(tmp_path):
     assert evaluate(data.mesh, truth, again).metrics["albedo"]["diffuse"]["psnr_history"] == curve
     with pytest.raises(InputError, match="ad_time_budget"):
         EstimatorConfig(ad_time_budget=0.0)
+
+
+def test_mitsuba_ad_takes_at_least_one_step_whatever_its_budget(tmp_path):
+    """--time-budget 1e-9 ran no step and returned the initial guess with exit 0."""
+    generate(load_spec(MICRO), str(tmp_path / "micro"))
+    data = read_dataset(str(tmp_path / "micro"), load_test=False).data
+    est = estimate(data, "mitsuba-ad", EstimatorConfig(sh_order=2, directions=100, ad_time_budget=1e-9))
+    assert est.info["steps"] == 1

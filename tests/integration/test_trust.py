@@ -69,7 +69,7 @@ def test_holdout_indices_spread_and_refuse_bad_counts():
     np.testing.assert_array_equal(holdout_indices(10, 2), [3, 6])
     assert len(holdout_indices(24, 4)) == 4
     for k in (0, 9):
-        with pytest.raises(InputError, match="holdout-views"):
+        with pytest.raises(InputError, match="held-out views must lie in"):
             holdout_indices(10, k)
 
 
