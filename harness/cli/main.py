@@ -236,6 +236,8 @@ def cmd_suite(args) -> int:
     if args.scheduler and args.executor != "dask":
         raise InputError("--scheduler names a Dask scheduler; it needs --executor dask")
     suite = load_suite(args.suite, args.profile)
+    if args.dry_run:
+        return _dry_run(suite, args)
     baseline = read_rows(args.baseline) if args.baseline else None   # read before the sweep may replace it
     check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
     if args.executor == "dask" and args.scheduler and args.scheduler.startswith("tcp://"):
@@ -251,6 +253,33 @@ def cmd_suite(args) -> int:
           f"sweep plots: {os.path.abspath(os.path.join(args.output, 'compare', 'sweep.html'))}")
     verdict = summary["regressions"]
     return 0 if verdict is None else _regression_exit(verdict, "baseline sweep")
+
+
+def _dry_run(suite: dict, args) -> int:
+    """Print a sweep's size without running it: datasets and runs, how many are cached, and a
+    time estimate from the finished jobs' own records in the folder (when it holds any)."""
+    from harness.sweep.jobs import finished
+    from harness.sweep.runner import plan
+
+    datasets, runs = plan(suite, args.output, not args.no_mitsuba, args.force, args.variant)
+    cached = {kind: [finished(j["folder"], j["id"]) for j in jobs] for kind, jobs in (("dataset", datasets),
+                                                                                        ("run", runs))}
+    print(f"suite {suite['name']}: {len(datasets)} datasets x {len(suite['methods'])} methods = {len(runs)} runs "
+          f"(scenes: {', '.join(sorted({d['scene'] for d in datasets}))})")
+    lines = []
+    for kind, records in cached.items():
+        done = [r for r in records if r is not None and not args.force]
+        todo = len(records) - len(done)
+        seconds = [float(r["seconds"]) for r in done if isinstance(r.get("seconds"), (int, float))]
+        estimate = (f", about {todo * float(np.median(seconds)) / 60:.0f} min at the median of the cached ones "
+                    f"({np.median(seconds):.0f} s each, --jobs {args.jobs}: divide by the workers)"
+                    if seconds and todo else "")
+        lines.append(f"{kind}s: {len(done)} cached, {todo} to run{estimate}")
+    print("\n".join(lines))
+    if not any(r is not None for records in cached.values() for r in records):
+        print("no finished job in the folder to time from: a tiny-profile job takes seconds, a full-size one "
+              "tens of seconds to minutes (benchmarks/README.md)")
+    return 0
 
 
 def cmd_demo(args) -> int:
@@ -545,8 +574,40 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def _add_suite_parser(sub, name: str) -> None:
+    su = sub.add_parser(name, help=("benchmark sweeps: scenes x sweep points x seeds x methods -> cached datasets, "
+                                    "runs, reports, comparison and sweep plots" + (" (alias of suite)"
+                                                                                  if name == "bench" else "")))
+    su.add_argument("suite", help="suite TOML, or a name under scenes/suites/ (e.g. smoke, paper, robustness)")
+    su.add_argument("-o", "--output", required=True)
+    su.add_argument("--profile", help="scene profile for every dataset (e.g. tiny, benchmark)")
+    su.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba cross-check in the reports")
+    su.add_argument("--force", "--overwrite", action="store_true", dest="force",
+                    help="redo every job (finished jobs are otherwise reused)")
+    su.add_argument("--jobs", type=_int_at_least(1, MAX_JOBS), default=1,
+                    help=f"worker processes (spawned; Dr.Jit threads split between them), 1 to {MAX_JOBS}")
+    su.add_argument("--executor", choices=("local", "dask"), default="local")
+    su.add_argument("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (--executor dask)")
+    su.add_argument("--variant", choices=VARIANTS)
+    su.add_argument("--baseline", help="a previous sweep's compare/sweep.json: a regression verdict per row and "
+                                       "tracked metric (exit 1 when one is worse than its tolerance)")
+    su.set_defaults(func=cmd_suite)
+    su.add_argument("--dry-run", action="store_true",
+                    help="print the datasets and runs the sweep holds (and which are cached), then stop")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("pseudolight")
+    except PackageNotFoundError:   # run from a checkout that was not installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="pseudolight", description=__doc__)
+    p.add_argument("--version", action="version", version=f"pseudolight {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("scenes", help="list the shipped scene specs")
@@ -618,23 +679,8 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--overwrite", action="store_true")
     cp.set_defaults(func=cmd_compare)
 
-    su = sub.add_parser("suite", aliases=["bench"],
-                        help="benchmark sweeps: scenes x sweep points x seeds x methods -> cached datasets, runs, "
-                             "reports, comparison and sweep plots")
-    su.add_argument("suite", help="suite TOML, or a name under scenes/suites/ (e.g. smoke, paper, robustness)")
-    su.add_argument("-o", "--output", required=True)
-    su.add_argument("--profile", help="scene profile for every dataset (e.g. tiny, benchmark)")
-    su.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba cross-check in the reports")
-    su.add_argument("--force", "--overwrite", action="store_true", dest="force",
-                    help="redo every job (finished jobs are otherwise reused)")
-    su.add_argument("--jobs", type=_int_at_least(1, MAX_JOBS), default=1,
-                    help=f"worker processes (spawned; Dr.Jit threads split between them), 1 to {MAX_JOBS}")
-    su.add_argument("--executor", choices=("local", "dask"), default="local")
-    su.add_argument("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (--executor dask)")
-    su.add_argument("--variant", choices=VARIANTS)
-    su.add_argument("--baseline", help="a previous sweep's compare/sweep.json: a regression verdict per row and "
-                                       "tracked metric (exit 1 when one is worse than its tolerance)")
-    su.set_defaults(func=cmd_suite)
+    for name in ("suite", "bench"):   # one parser each, so each usage line names its own command
+        _add_suite_parser(sub, name)
 
     tx = sub.add_parser("export-texture", help="an estimate as texture maps: UV atlas, PNG/EXR, OBJ+MTL, glTF")
     tx.add_argument("run")

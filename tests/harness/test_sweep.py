@@ -94,6 +94,9 @@ def test_gpu_pool_pins_one_worker_per_device():
 
 def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     out = tmp_path / "smoke"
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--dry-run"]) == 0
+    dry = capsys.readouterr().out
+    assert "2 datasets x 2 methods = 4 runs" in dry and "runs: 0 cached, 4 to run" in dry and not out.exists()
     assert main(["suite", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
     first = capsys.readouterr().out
     assert "2 datasets, 4 runs: 6 jobs run, 0 reused" in first
@@ -108,6 +111,8 @@ def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     stamp = os.path.getmtime(run_json)
     assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
     assert "0 jobs run, 6 reused" in capsys.readouterr().out and os.path.getmtime(run_json) == stamp
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--dry-run"]) == 0
+    assert "runs: 4 cached, 0 to run" in capsys.readouterr().out
     # an interrupted sweep: one run lost its record; only that job runs again
     os.remove(run_json.parent.parent / jobs.JOB_FILE)
     assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
@@ -224,3 +229,10 @@ def test_bench_never_writes_into_a_folder_of_the_users(tmp_path, capsys):
     assert main(["bench", "smoke", "-o", str(user), "--profile", "tiny"]) == 2
     assert "not made by pseudolight bench" in capsys.readouterr().err
     assert (user / "sweep-summary.json").read_text() == "my notes" and len(list(user.iterdir())) == 1
+
+
+def test_version_and_each_commands_own_usage_line(capsys):
+    assert main(["--version"]) == 0 and capsys.readouterr().out.startswith("pseudolight ")
+    for name in ("bench", "suite"):
+        assert main([name, "--help"]) == 0
+        assert capsys.readouterr().out.startswith(f"usage: pseudolight {name} ")
