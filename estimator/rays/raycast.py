@@ -9,6 +9,7 @@ import numpy as np
 
 from ..core.camera import Camera
 from ..core.data import TriangleMesh
+from ..core.errors import InputError
 from . import backend
 
 
@@ -29,6 +30,9 @@ def mitsuba_mesh(mesh: TriangleMesh, name: str = "mesh", props=None):
     return m
 
 
+MAX_COORDINATE = 1e15   # float32: squared distances stay below 1e30 (they overflow at 3.4e38)
+
+
 class RayCaster:
     """A Mitsuba scene holding one mesh (robust intersections), for batched ray queries.
 
@@ -39,6 +43,11 @@ class RayCaster:
     """
 
     def __init__(self, mesh: TriangleMesh, variant: str | None = None):
+        reach = float(np.abs(mesh.vertices).max())
+        if reach > MAX_COORDINATE:
+            raise InputError(f"the mesh reaches {reach:.3g} from the origin (at most {MAX_COORDINATE:g}): rays are "
+                             "traced in float32, whose squared distances overflow there; rescale the mesh and the "
+                             "cameras")
         self.mi = backend.set_variant(variant)
         self.mesh = mesh
         self.scene = self.mi.load_dict({
