@@ -27,7 +27,28 @@ def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
 
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 / sRGB luminance weights (linear RGB)
-SCALES = ("dc", "lstsq")
+SCALES = ("dc", "lstsq", "robust")
+GROSS_FACTOR = 2.0   # a face whose scaled albedo is off by more than this factor is a gross error, set aside
+
+
+def robust_scale(values: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel scale that a few faces cannot overturn, and the faces it set aside.
+
+    The median of the per-face ratios reference / values starts it; faces whose scaled value
+    is off by more than :data:`GROSS_FACTOR` in any channel are set aside; the least-squares
+    scale of the rest is the result (the Stanford-ORB scale on the faces that are not gross
+    errors). values, reference : (N, C) -> ((C,), (N,) bool set aside).
+    """
+    v, r = np.asarray(values, float), np.asarray(reference, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where((v > 0) & (r > 0), r / v, np.nan)
+    start = np.array([np.nanmedian(ratio[:, c]) if np.any(np.isfinite(ratio[:, c])) else 1.0
+                      for c in range(v.shape[1])])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.abs(np.log(np.where(r > 0, v * start / r, np.nan)))
+    aside = np.any(np.nan_to_num(off, nan=np.inf) > np.log(GROSS_FACTOR), axis=1) & np.any(r > 0, axis=1)
+    keep = ~aside if np.any(~aside) else np.ones(len(v), bool)
+    return lstsq_scale(v[keep], r[keep]), aside
 
 
 def lstsq_scale(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -53,6 +74,8 @@ def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, sca
         coefficient of the true illumination per channel (``dc`` (3,)); nothing is
         fitted (the paper's normalisation). 'lstsq' -- a per-channel least-squares
         scale s_c = sum(e t) / sum(e^2) fitted on the masked faces (Stanford-ORB).
+        'robust' -- :func:`robust_scale`: the least-squares scale of the faces that are not
+        gross errors, which a handful of absurd faces cannot move.
 
     Returns
     -------
@@ -65,6 +88,8 @@ def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, sca
         t = t * np.asarray(dc, float)[None]
     elif scale == "lstsq":
         e = e * lstsq_scale(e, t)[None]
+    elif scale == "robust":
+        e = e * robust_scale(e, t)[0][None]
     else:
         raise ValueError(f"scale must be one of {SCALES}, got {scale!r}")
     with np.errstate(divide="ignore", invalid="ignore"):

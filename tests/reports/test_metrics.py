@@ -105,3 +105,19 @@ def test_adjusted_rand_index_known_values():
     assert metrics.adjusted_rand_index(a, a) == 1.0
     assert metrics.adjusted_rand_index(a, np.array([5, 5, 7, 7, 9, 9])) == 1.0
     assert metrics.adjusted_rand_index(a, np.array([0, 1, 0, 1, 0, 1])) < 0
+
+
+def test_a_handful_of_absurd_faces_cannot_overturn_the_robust_gauge():
+    """One glare patch left 5 of 1,280 faces 11-15 times too bright: the least-squares gauge then
+    put nearly every face outside ±10 %; the robust gauge sets those 5 aside and says so."""
+    rng = np.random.default_rng(0)
+    truth = rng.uniform(0.05, 0.8, (1280, 3))
+    estimate = 0.37 * truth * rng.normal(1.0, 0.01, (1280, 3))     # right up to a gauge and 1 % noise
+    estimate[:5] *= rng.uniform(11, 15, (5, 1))
+    mask = np.ones(1280, bool)
+    within = {s: metrics.ratio_summary(metrics.albedo_ratios(estimate, truth, mask, s)[:, 3])["within_10"]
+              for s in ("lstsq", "robust")}
+    assert within["lstsq"] < 0.5 and within["robust"] > 0.99
+    scale, aside = metrics.robust_scale(estimate, truth)
+    np.testing.assert_allclose(scale, 1 / 0.37, rtol=0.01)
+    assert aside.sum() == 5 and aside[:5].all()
