@@ -34,19 +34,21 @@ GROSS_FACTOR = 2.0   # a face whose scaled albedo is off by more than this facto
 def robust_scale(values: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-channel scale that a few faces cannot overturn, and the faces it set aside.
 
-    The median of the per-face ratios reference / values starts it; faces whose scaled value
-    is off by more than :data:`GROSS_FACTOR` in any channel are set aside; the least-squares
-    scale of the rest is the result (the Stanford-ORB scale on the faces that are not gross
-    errors). values, reference : (N, C) -> ((C,), (N,) bool set aside).
+    The median of the per-face ratios reference / values starts it; faces whose scaled
+    luminance is off by more than :data:`GROSS_FACTOR` are set aside (luminance, so a channel
+    that is zero in a saturated colour is no gross error); the least-squares scale of the rest
+    is the result (the Stanford-ORB scale on the faces that are not gross errors).
+    values, reference : (N, C) -> ((C,), (N,) bool set aside).
     """
     v, r = np.asarray(values, float), np.asarray(reference, float)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where((v > 0) & (r > 0), r / v, np.nan)
     start = np.array([np.nanmedian(ratio[:, c]) if np.any(np.isfinite(ratio[:, c])) else 1.0
                       for c in range(v.shape[1])])
+    scaled, true = (v * start) @ LUMINANCE[: v.shape[1]], r @ LUMINANCE[: v.shape[1]]
     with np.errstate(divide="ignore", invalid="ignore"):
-        off = np.abs(np.log(np.where(r > 0, v * start / r, np.nan)))
-    aside = np.any(np.nan_to_num(off, nan=np.inf) > np.log(GROSS_FACTOR), axis=1) & np.any(r > 0, axis=1)
+        off = np.abs(np.log(np.where((true > 0) & (scaled > 0), scaled / true, np.nan)))
+    aside = (np.nan_to_num(off, nan=np.inf) > np.log(GROSS_FACTOR)) & (true > 0)
     keep = ~aside if np.any(~aside) else np.ones(len(v), bool)
     return lstsq_scale(v[keep], r[keep]), aside
 

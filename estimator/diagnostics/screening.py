@@ -4,10 +4,12 @@ unestimated with a reason, and never reported as a number.
 Three reasons, each a property of the data or of physics, none fitted to a scene:
 
 * ``non-finite``: the solve gave NaN or infinity.
-* ``beyond physical range``: the albedo's largest channel exceeds :data:`MAX_ALBEDO_RATIO`
-  times the median luminance of the estimated faces whose albedo is not zero. Albedos lie in (0, 1] and no real surface
-  reflects less than about 1 % (:data:`DARKEST_ALBEDO`), so no face can be more than 100 times
-  brighter than the median face, whatever the unknown overall scale (the gauge).
+* ``beyond physical range``: a channel of the albedo is negative, or exceeds
+  :data:`MAX_ALBEDO_RATIO` times that channel's median over the estimated faces where it is
+  not zero. Albedos lie in (0, 1] and no real surface reflects less than about 1 %
+  (:data:`DARKEST_ALBEDO`), so no face can be more than 100 times brighter than the median
+  face in any channel, whatever the unknown scale each channel has (the gauge is per channel,
+  so channels are compared only with themselves).
 * ``undetermined``: the standard error of the albedo the face takes (its own, or its group's
   when the method shares one albedo over a region) is at least :data:`MAX_RELATIVE_SE` times
   the face's whole albedo (diffuse plus specular): at one sigma the observations cannot tell
@@ -23,7 +25,6 @@ DARKEST_ALBEDO = 0.01                  # black velvet, carbon black: the darkest
 MAX_ALBEDO_RATIO = 1.0 / DARKEST_ALBEDO
 MAX_RELATIVE_SE = 1.0
 REASONS = ("non-finite", "beyond physical range", "undetermined")
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])   # Rec. 709
 
 
 def out_of_range(est: Estimate) -> np.ndarray:
@@ -34,10 +35,13 @@ def out_of_range(est: Estimate) -> np.ndarray:
     finite = np.all(np.isfinite(albedo), axis=1)
     code[est.observed & ~finite] = 1
     kept = est.observed & finite
-    luminance = np.where(kept, np.abs(np.where(finite[:, None], albedo, 0.0)) @ LUMINANCE, 0.0)
-    if np.any(luminance > 0):   # a zero albedo carries no level (the SE test judges it)
-        level = float(np.median(luminance[luminance > 0]))
-        code[kept & (np.abs(albedo).max(axis=1) > MAX_ALBEDO_RATIO * level)] = 2
+    values = np.where(kept[:, None], albedo, 0.0)
+    beyond = np.any(values < 0, axis=1)
+    for c in range(values.shape[1]):
+        positive = values[:, c] > 0
+        if positive.any():   # a zero channel carries no level (the SE test judges a face that is all zero)
+            beyond |= values[:, c] > MAX_ALBEDO_RATIO * float(np.median(values[positive, c]))
+    code[kept & beyond] = 2
     return code
 
 

@@ -25,6 +25,7 @@ import os
 import re
 import shutil
 import tempfile
+import threading
 import time
 
 from estimator import InputError
@@ -32,6 +33,7 @@ from estimator import InputError
 MARKER = ".pseudolight-output"
 LOCK = ".pseudolight-lock"
 UNLOCKED_STALE_S = 60.0
+_LOCKS = threading.Lock()     # this process's threads take and check locks one at a time
 _HELD: dict[str, int] = {}   # lock file -> descriptor, held by this process (closing any descriptor
 #                              of a file would release this process's POSIX lock on it: never opened twice)
 _PARTIAL = re.compile(r"^\..+\.pseudolight-(?:partial|old)-(\d{1,9})-")
@@ -104,28 +106,47 @@ def _process_alive(pid: int) -> bool:
 
 
 def _hold_lock(folder: str) -> None:
-    """Take the exclusive lock of a partial folder for this process's lifetime (or until released)."""
+    """Take the exclusive lock of a partial folder for this process's lifetime (or until released).
+    The lock file is locked under a private name and then renamed into place, so no cleaner sees
+    it unlocked. Where the file system has no locks (ENOLCK, EOPNOTSUPP) the folder goes
+    without one, and the PID-and-age rule protects it."""
     path = os.path.join(folder, LOCK)
-    fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
-    fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    _HELD[path] = fd
+    private = f"{path}.{os.getpid()}-{threading.get_ident()}"
+    with _LOCKS:
+        fd = os.open(private, os.O_CREAT | os.O_RDWR, 0o644)
+        try:
+            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            os.remove(private)
+            return
+        os.replace(private, path)
+        _HELD[path] = fd
 
 
-def _release_lock(folder: str) -> None:
-    """Give up a partial folder's lock and remove its lock file (before the folder is published)."""
-    path = os.path.join(folder, LOCK)
-    fd = _HELD.pop(path, None)
-    if fd is not None:
-        os.close(fd)
-    with contextlib.suppress(FileNotFoundError):
-        os.remove(path)
+def _release_lock(folder: str, published: str | None = None) -> None:
+    """Give up a partial folder's lock and remove its lock file; ``published``: the folder was
+    renamed there while the lock was held (a cleaner that opened the old name then finds
+    nothing to remove)."""
+    with _LOCKS:
+        fd = _HELD.pop(os.path.join(folder, LOCK), None)
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(os.path.join(published or folder, LOCK))
+        if fd is not None:
+            os.close(fd)
 
 
 def _owner_alive(folder: str, pid: int) -> bool:
     """Whether the process that writes ``folder`` still runs: it holds the folder's lock."""
     path = os.path.join(folder, LOCK)
-    if path in _HELD:
-        return True
+    with _LOCKS:
+        if path in _HELD:
+            return True
+        return _lock_is_held(folder, path, pid)
+
+
+def _lock_is_held(folder: str, path: str, pid: int) -> bool:
+    """:func:`_owner_alive` for a lock this process does not hold (called under ``_LOCKS``)."""
     try:
         fd = os.open(path, os.O_RDWR)
     except FileNotFoundError:   # no lock (yet, or an older version's folder): PID and age decide
@@ -190,7 +211,6 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
             yield tmp
             with open(os.path.join(tmp, MARKER), "w") as f:
                 json.dump({"kind": kind, "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid()}, f)
-            _release_lock(tmp)
             if os.path.exists(path):
                 if not overwrite:  # another process wrote it meanwhile
                     raise OutputExistsError(f"{path} appeared while this output was being written")
@@ -199,9 +219,11 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
                                          dir=parent)
                 os.replace(path, os.path.join(trash, "old"))
                 os.replace(tmp, path)
+                _release_lock(tmp, path)   # held through the rename: no cleaner can take it before
                 shutil.rmtree(trash, ignore_errors=True)
             else:
                 os.replace(tmp, path)
+                _release_lock(tmp, path)
         except OSError as exc:
             raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
         except InputError as exc:

@@ -9,6 +9,7 @@ the record written to ``transforms.json``.
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 
 import numpy as np
@@ -259,4 +260,17 @@ def corrupt_dataset(source: str, out_dir: str, faults: FaultSpec, seed: int = 0,
                     arrays = {k: old[k][face_source] if old[k].shape[:1] == (ds.data.mesh.num_faces,) else old[k]
                               for k in old.files}
                 np.savez(materials, **arrays)
+                remap_brdf_labels(os.path.join(tmp, "ground_truth", "illumination.json"), face_source)
     return record
+
+
+def remap_brdf_labels(path: str, face_source: np.ndarray) -> None:
+    """A mixed-material ground truth's per-face ``brdf.labels`` in a ground_truth/illumination.json,
+    carried to the written faces of a decimated mesh (each takes its rendered face's label)."""
+    with open(path) as f:
+        record = json.load(f)
+    brdf = record.get("brdf") or {}
+    if brdf.get("model") == "mixed":
+        brdf["labels"] = np.asarray(brdf["labels"])[face_source].tolist()
+        with open(path, "w") as f:
+            json.dump(record, f, indent=1)

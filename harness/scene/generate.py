@@ -115,7 +115,9 @@ def material_dict(m, regions: np.ndarray | None = None) -> dict:
         return {"model": "diffuse", "exponent": 10000.0}
     out = {"model": m.model, "int_ior": float(m.int_ior), "exponent": 10000.0}
     if m.model == "roughplastic":
-        out.update(alpha=float(m.alpha), distribution=m.distribution, exponent=float(2.0 / m.alpha ** 2 - 2.0))
+        # the Phong exponent of the same Beckmann width; at least 0.01 (alpha = 1 gives 0: a near-uniform lobe)
+        exponent = max(float(2.0 / m.alpha ** 2 - 2.0), 0.01)
+        out.update(alpha=float(m.alpha), distribution=m.distribution, exponent=exponent)
     return out
 
 
@@ -196,8 +198,10 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         write_dataset(tmp, mesh, views, list(zip(test_cams, test)), meta, half=spec.render.half, ldr=ldr)
         truth = scene.ground_truth()
         if source is not None:   # a decimated mesh: each written face carries its rendered face's truth
+            brdf = truth.brdf if truth.brdf.get("model") != "mixed" else {
+                **truth.brdf, "labels": np.asarray(truth.brdf["labels"])[source].tolist()}
             truth = dataclasses.replace(truth, diffuse=truth.diffuse[source], specular=truth.specular[source],
-                                        regions=None if truth.regions is None else truth.regions[source])
+                                        regions=None if truth.regions is None else truth.regions[source], brdf=brdf)
         write_ground_truth(tmp, truth, envmap=scene.illumination.envmap,
                            extra={"scene_spec": spec_json(spec),
                                   "region_names": [r.name for r in spec.material.regions] or None})

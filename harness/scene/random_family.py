@@ -40,7 +40,9 @@ PROFILES = {"tiny": {"cameras.width": 128, "cameras.height": 128, "render.spp": 
 
 
 def blackbody_rgb(kelvin: float) -> list[float]:
-    """Linear Rec. 709 colour of a black body at ``kelvin``, unit luminance (CIE 1931 observer)."""
+    """Linear Rec. 709 colour of a light of correlated colour temperature ``kelvin``, unit
+    luminance: on the CIE daylight locus from 4000 K, Kang et al.'s Planckian approximation
+    below (colour-science)."""
     import colour
 
     xy = colour.temperature.CCT_to_xy_CIE_D(kelvin) if kelvin >= 4000 else colour.temperature.CCT_to_xy_Kang2002(
@@ -62,7 +64,7 @@ def _unit(rng: np.random.Generator) -> list[float]:
 
 
 def _palette(rng: np.random.Generator, n: int) -> list[list[float]]:
-    """``n`` albedos: one very dark (luminance 0.02-0.1), one saturated, the rest of any hue and
+    """``n`` albedos: one very dark (mean over channels 0.02-0.1), one saturated, the rest of any hue and
     lightness (0.1-0.8), in random order."""
     colours = []
     for k in range(n):

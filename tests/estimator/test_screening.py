@@ -88,3 +88,13 @@ def test_faces_a_per_face_solve_leaves_at_zero_are_undetermined(scene):
     reason = est.face_stats["unestimated_reason"]
     assert est.info["unestimated"].get("undetermined", 0) == int(np.sum(reason == 3))
     assert np.all(est.diffuse[est.observed] + est.specular[est.observed] > 0)
+
+
+def test_the_range_is_judged_per_channel_so_a_coloured_light_sets_no_face_aside():
+    """Each channel has its own gauge (1 / the light's DC there): under a 2500 K light six dark
+    bluish faces and four red ones, all correct, stay estimated; a negative channel does not."""
+    light = np.array([2.06, 0.77, 0.14])                 # the light's DC per channel
+    diffuse = np.array([[0.012, 0.012, 0.036]] * 6 + [[0.8, 0.03, 0.03]] * 4) / light
+    assert not screening.out_of_range(_estimate(diffuse)).any()
+    diffuse[3, 1] = -0.01
+    np.testing.assert_array_equal(np.nonzero(screening.out_of_range(_estimate(diffuse)))[0], [3])

@@ -121,3 +121,10 @@ def test_a_handful_of_absurd_faces_cannot_overturn_the_robust_gauge():
     scale, aside = metrics.robust_scale(estimate, truth)
     np.testing.assert_allclose(scale, 1 / 0.37, rtol=0.01)
     assert aside.sum() == 5 and aside[:5].all()
+
+
+def test_the_robust_gauge_sets_aside_no_exact_face_of_a_saturated_colour():
+    truth = np.array([[0.5, 0.0, 0.0], [0.0, 0.6, 0.1], [0.3, 0.3, 0.3], [0.02, 0.05, 0.7]])
+    scale, aside = metrics.robust_scale(2.0 * truth, truth)
+    assert not aside.any()
+    np.testing.assert_allclose(scale, 0.5)

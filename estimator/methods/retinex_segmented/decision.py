@@ -5,7 +5,8 @@ when one lowers their cost, uniform regions tied when they hold). Two fits of ho
 change across views may then replace it, because no albedo can bias them: the coat's lat-long
 map (a Fresnel dielectric coat) and a shared Phong lobe. Each is a candidate only when it
 explains at least ``reflected_min_explained`` of the view changes; where both are, the one
-that explains more wins. A texture whose coat's map explains the view changes well enough to
+that explains more is the candidate (a coat's map that wins but whose sun disagrees with the
+edges' falls back to the edges, not to the lobe). A texture whose coat's map explains the view changes well enough to
 remove the coat's reflection (``reflected_diffuse_min_explained``), but not to give the light,
 keeps the edges' light fitted on that cleaner diffuse radiance.
 """

@@ -63,17 +63,18 @@ class RetinexSegmented(Method):
        ``region_max_deviation`` and ``region_max_drift`` times the noise between neighbours
        (a texture chained into regions). Otherwise the edges alone set the light and every
        face keeps its own albedo (a texture).
-    5. The specular albedo is solved with that light fixed (per region; faces outside
-       every region share the regions' median, or one fit over all faces without regions).
+    5. The specular albedo is solved with that light fixed (per region; faces outside every
+       region share the regions' median, or, without regions, the median of every face's own fit).
     6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
        light's low orders (``coat_order``) is fitted to the colours' changes across views
        (:mod:`estimator.light.coat`), scaled down until at most ``coat_max_negative`` more of the
        observations would turn non-positive, subtracted, and steps 1-5 run again.
 
-    On a coated texture (step 4 finds no uniform regions, the edge search kept no sun) the
-    light comes instead from the coat's reflection (:mod:`estimator.light.coat_map`), which
-    the texture cannot bias, when that map is determined and explains at least
-    ``reflected_min_explained`` of the view changes; step 6 is then skipped. The albedo is
+    On a coated object (a texture, or uniform regions with ``reflected_regions``) the light
+    comes instead from the coat's reflection (:mod:`estimator.light.coat_map`), which no albedo
+    can bias, when that map is determined and explains at least ``reflected_min_explained`` of
+    the view changes and, where the edge search kept a sun, the map's own sun lies within
+    ``reflected_sun_max_angle`` of it; step 6 is then skipped. The albedo is
     then that fit's diffuse radiance (the coat's reflection removed, its exit transmission
     1 - F(n . v) divided out) over the light's shading through the coat (the cosine weighted
     by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``); on a texture the light's SH

@@ -14,8 +14,8 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     """The :class:`Estimate` of hypothesis ``h``: a sun joins the reported light as a delta
     light in SH; the light takes a unit DC per channel (the albedos the inverse scale); the
     specular albedo is solved with the light fixed (``method``'s robust group solve), per region,
-    faces outside every region sharing the regions' median (or every face its own without
-    regions)."""
+    faces outside every region sharing the regions' median (without regions, every face the
+    median of the per-face fits: one face's specular is too weakly seen to stand alone)."""
     c, prep, model = ctx.config, ctx.prep, ctx.model
     f = prep.data.mesh.num_faces
     m = ctx.sky_width
