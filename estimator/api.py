@@ -144,5 +144,8 @@ def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates
                 log(f"phong exponent {n}: residual {tried[float(n)].info['residuals'][-1]:.5f}")
         est = min(tried.values(), key=lambda e: e.info["residuals"][-1])
         est.info["exponent_selection"] = {str(n): e.info["residuals"][-1] for n, e in tried.items()}
+        if log:
+            log(f"phong exponent chosen: {est.config.phong_exponent:g} (the lowest final residual, "
+                f"{est.info['residuals'][-1]:.5f})")
         return est
-    return cls(config, known_sh, known_radiance).solve(prep)
+    return cls(config, known_sh, known_radiance, log).solve(prep)

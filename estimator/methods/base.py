@@ -48,11 +48,12 @@ class Method(ABC):
     reports_residual: ClassVar[bool] = True
 
     def __init__(self, config: EstimatorConfig, known_sh: np.ndarray | None = None,
-                 known_radiance: np.ndarray | None = None):
+                 known_radiance: np.ndarray | None = None, log=None):
         self.config = config
         self.model = reflection_model(config)
         self.known_sh = known_sh
         self.known_radiance = known_radiance
+        self.log = log or (lambda message: None)   # progress lines of a long solve
 
     @abstractmethod
     def solve(self, prep: Prepared) -> Estimate: ...

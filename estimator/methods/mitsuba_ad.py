@@ -157,6 +157,9 @@ class MitsubaAD(Method):
                 snapshots.append(np.array(opt["object.face_albedo"], dtype=np.float64).reshape(-1, 3))
                 snapshot_seconds.append(elapsed)
                 next_snapshot += 1 / 8
+                if history["loss"]:
+                    self.log(f"mitsuba-ad: step {step}, loss {history['loss'][-1]:.4g}, {elapsed:.1f} s "
+                             f"({min(progress, 1.0):.0%} of its budget)")
             if progress >= 1.0 and step > 0:   # at least one step, whatever the budget
                 break
             if not refined and progress >= 0.5:

@@ -60,3 +60,15 @@ def test_exponent_selection_follows_the_contract(scene, method):
     assert est.config.phong_exponent in (5.0, 10.0)
     chosen = est.info["exponent_selection"][str(est.config.phong_exponent)]
     assert chosen == min(est.info["exponent_selection"].values())
+
+
+def test_progress_lines_name_the_chosen_exponent_and_the_peers_steps(scene):
+    data, _ = scene
+    lines = []
+    estimate(data, "bilinear-per-face", micro_config(specular_model="lobe"), log=lines.append,
+             exponent_candidates=(5.0, 10.0))
+    assert any(line.startswith("phong exponent chosen: ") for line in lines)
+    lines.clear()
+    estimate(data, "mitsuba-ad", micro_config(**SETTINGS["mitsuba-ad"]), log=lines.append)
+    steps = [line for line in lines if line.startswith("mitsuba-ad: step ")]
+    assert steps and "loss" in steps[-1]
