@@ -19,10 +19,9 @@ from .rays.raycast import RayCaster
 
 EXPONENT_CANDIDATES = (5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0)
 
-# the default for datasets that recommend no method: on the real-light family (36 cases) it
-# reaches a median diffuse PSNR of 33.9 dB against the paper's 24.9 (28 cases meet all three
-# targets against 5; benchmarks/README.md); the paper's algorithm stays available, unchanged,
-# as 'bilinear-clustered', and the previous default as 'bilinear-segmented'
+# the default for datasets that recommend no method (its accuracy against the paper's method:
+# benchmarks/README.md); the paper's algorithm stays available, unchanged, as
+# 'bilinear-clustered', and the previous default as 'bilinear-segmented'
 DEFAULT_METHOD = "retinex-segmented"
 
 

@@ -3,8 +3,8 @@
 A plastic's clear coat reflects the environment about the mirror direction with the
 Fresnel factor of the view angle. Its sharp glints rarely reach a low quantile of a
 face's colours, but the reflection of the broad, low-order part of the light does: it is
-an additive term that inflates dark albedos and dark channels (on the real-light family a
-0.06 channel came out 30 % too bright). That term varies with the view while the diffuse
+an additive term that inflates dark albedos and dark channels most, relative to their
+own level. That term varies with the view while the diffuse
 radiance does not, so its weight is fitted to each face's colour changes across views:
 
     rgb_fv - mean_v(rgb_fv)  ~  k_c [x_fv - mean_v(x_fv)],   x_fv = F(n . v) L_low(r_fv)

@@ -91,11 +91,9 @@ class ReflectedLight:
         face's diffuse) that the reflected light explains, per channel, robust-weighted.
     rows : number of rows used.
     determined : at least :data:`ROWS_PER_VERTEX` rows per vertex beyond the faces' own
-        unknowns. A map on fewer fits the noise: at 12 views of 80² (the textured scene's tiny
-        profile: 2,519 rows, 0.6 per vertex) a 32 x 64 map explained 0.99999 of the view
-        changes and its light lowered the albedo PSNR from 18.5 to 17.4 dB (an 8 x 16 map:
-        12.4 dB). The full-size textured scenes (30 views of 256², 5120 faces) have about 25,000
-        rows, 10 per vertex.
+        unknowns. A map with fewer rows than that fits the noise: it explains nearly all of
+        the view changes whatever the light (30 views of 256² on a 5,120-face object give about
+        10 rows per vertex; 12 views of 80², under one).
     """
 
     radiance: np.ndarray

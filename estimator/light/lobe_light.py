@@ -91,9 +91,9 @@ def fit_lobe_light(face: np.ndarray, rgb: np.ndarray, lobe_rows: np.ndarray, num
     lobe_rows : (N, M) each observation's lobe rows E_fv (:func:`estimator.model.reflection.lobe_matrix`).
     num_faces : F.
     ridge : weight of the coefficients' squared norm, relative to the data term's mean
-        diagonal (the lobe damps the high orders; a broad one almost erases them). On the
-        Phong textured scenes (exponent 10) 1e-6 / 1e-4 / 1e-3 / 1e-2 gave phong/lab
-        28.2 / 28.9 / 30.4 / 29.9 dB and phong/lab at 120 degrees 29.3 / 30.2 / 33.0 / 32.0.
+        diagonal: the lobe damps the high orders (a broad one almost erases them), so their
+        coefficients need a tie-breaker. The default was chosen during development, not yet
+        measured over the random scene family.
     rounds : reweighting rounds of the robust ``loss``.
 
     Returns
@@ -142,8 +142,7 @@ def dc_from_edges(lobe: LobeLight, c_matrix: np.ndarray, edges: np.ndarray, usab
         r_ij = (a_i - a_j) / sqrt(1 / S_i^2 + 1 / S_j^2) = (D_i S_j - D_j S_i) / sqrt(S_i^2 + S_j^2)
 
     (D's noise does not depend on e; a log ratio's does, and grows as e darkens the dark
-    faces, which pulled the DC 2-15 % low on the Phong textured scenes, against 0-2.5 % high
-    with this residual). e runs from 0 to the value that turns the 1 % darkest faces'
+    faces, which biases a log-ratio cost towards a low DC). e runs from 0 to the value that turns the 1 % darkest faces'
     diffuse radiance non-positive; the Cauchy cost of the residuals is sampled at ``steps``
     points and refined by a golden-section search between the best sample's neighbours,
     twice: with the cost's scale (:func:`estimator.solvers.robust.robust_scale`) taken at the middle

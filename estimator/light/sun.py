@@ -3,8 +3,8 @@
 A clear sky's sun (or a probe's) is a disc of half a degree that carries much of the
 irradiance. Truncated to order 10 its hard cast shadows ring and blur over ~20 degrees,
 and a shadow function sampled over ~1164 directions (~6 degrees apart) cannot place them:
-on the real-light family lit by Mitsuba's ``sunsky``, the edge fit of
-:mod:`estimator.light.edge_fit` reads the sun's shadow boundaries as albedo edges.
+the edge fit of :mod:`estimator.light.edge_fit` then reads the sun's shadow boundaries as
+albedo edges.
 
 Here the sun is a delta light of its own. Its shading column is exact,
 
@@ -111,15 +111,15 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
         (c_matrix (F, M) holds at least ``(order + 1)^2`` SH columns).
     directions : (K, 3) candidate start directions.
     start : (3,) first guess; None: the brightest of ``directions`` under the edge fit's
-        light at ``start_order`` (on the sun-sky family 3-16 degrees off, as at order 10).
+        light at ``start_order`` (a low-order light places its peak within a few rings of the sun).
     order : SH order of the sky during the search.
     steps_deg : angular steps of the pattern search (six neighbours on a ring), coarse to fine.
     iterations : Gauss-Newton steps of each edge fit (8 gave the same directions, 50 % slower).
     coat_ior : also try the sun's light through a dielectric coat of this index
         (:func:`sun_shading`): after the search with the bare column, the coated one is
         tried there and, when it costs less, kept and refined at the finest step. (Choosing
-        the column at the start direction and searching with it sent two diffuse cases to
-        a coated optimum 21-33 dB where the bare one gave 38-64.)
+        the column before the search lets the coat's column steer a bare surface's search to
+        a wrong optimum: the bare column places the shadows, which decide the direction.)
 
     Returns
     -------

@@ -53,7 +53,7 @@ class SegmentedConfig(Section):
 class BilinearSegmented(BilinearClustered):
     """The paper's bilinear solve with clusters found on the mesh instead of in colour space.
 
-    Beyond the paper (measured on the real-light family, ``benchmarks/real_light.py``):
+    Beyond the paper (its accuracy: ``benchmarks/README.md``):
 
     * Clusters are regions of the face-adjacency graph: neighbours whose shading-corrected
       albedos agree within ``segment_threshold`` (log) join; regions of uniform albedo

@@ -1,11 +1,11 @@
 """Robust weights for observations the reflection model cannot explain.
 
 Real images hold what the bilinear model has no term for: glints of a sharp light in a
-smooth coat (on the real-light family 0.1 % of the observations carry over 90 % of the
-squared colour norm), glare, occluders, misregistered pixels. Least squares lets them
-pull the light; iteratively reweighted least squares (IRLS) with a redescending
-M-estimator gives them a weight near zero. Residuals are relative to the exposure level
-(90th percentile of the observations' colour norms); the scale is their normalised median.
+smooth coat (a handful of observations can carry most of the squared colour norm), glare,
+occluders, misregistered pixels. Least squares lets them pull the light; iteratively
+reweighted least squares (IRLS) with a redescending M-estimator gives them a weight near
+zero. Residuals are relative to the exposure level (90th percentile of the observations'
+colour norms); the scale is their normalised median.
 """
 from __future__ import annotations
 

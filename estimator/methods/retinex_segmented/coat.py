@@ -40,7 +40,8 @@ def coat_map_candidate(ctx: FitContext, regions: bool) -> coat_map.ReflectedLigh
 def coat_map_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: coat_map.ReflectedLight) -> Hypothesis | None:
     """The light of the coat's map, on the map fit's diffuse radiance (faces it did not see keep
     theirs), or None where the edge search kept a sun and the map's own sun is not kept within
-    ``reflected_sun_max_angle`` of it (the whole map cannot hold a studio's lamps).
+    ``reflected_sun_max_angle`` of it (a 32 x 64 map's cells span about 6 degrees: a source
+    narrower than a cell is blurred and casts no hard shadow in it).
 
     On a texture the SH part of the light is then fitted to the edges of that diffuse radiance,
     beside the map's sun; on uniform regions each region takes its faces' median albedo."""
