@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator import Estimate, TriangleMesh, psnr_db
+from estimator import Estimate, TriangleMesh
 
 from . import metrics
 from .ground_truth import (
@@ -98,10 +98,10 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
         s = metrics.lstsq_scale(est_albedo[mask], true_albedo[mask])
         de = metrics.ciede2000(est_albedo[mask] * s, true_albedo[mask]) if mask.any() else np.zeros(0)
         entry["psnr_lstsq"] = metrics.albedo_psnr(est_albedo, true_albedo, mask)
-        if mask.any():   # the robust gauge's PSNR over every evaluated face, and the share it set aside
-            robust, aside = metrics.robust_scale(est_albedo[mask], true_albedo[mask])
+        entry["psnr_robust"] = metrics.albedo_psnr(est_albedo, true_albedo, mask, "robust")
+        if mask.any():   # the share of faces the robust gauge set aside
+            _, aside = metrics.robust_scale(est_albedo[mask], true_albedo[mask])
             entry["robust"]["set_aside_share"] = float(aside.mean())
-            entry["psnr_robust"] = psnr_db(float(np.mean((est_albedo[mask] * robust - true_albedo[mask]) ** 2)), 1.0)
         history = est.face_stats.get("albedo_history") if component == "diffuse" else None
         seconds = (est.info.get("ad_history") or {}).get("snapshot_seconds")
         if history is not None and seconds is not None and len(seconds) == history.shape[1]:

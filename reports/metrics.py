@@ -100,13 +100,15 @@ def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, sca
     return np.column_stack([per_channel, lum])
 
 
-def albedo_psnr(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float | None:
-    """PSNR (dB, peak 1) of per-face albedo (F, 3) over the masked faces after a per-channel
-    least-squares scale of the estimate onto the truth (the albedo/light gauge)."""
+def albedo_psnr(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, gauge: str = "lstsq") -> float | None:
+    """PSNR (dB, peak 1) of per-face albedo (F, 3) over every masked face after a per-channel
+    scale of the estimate onto the truth (the albedo/light gauge): 'lstsq' (:func:`lstsq_scale`)
+    or 'robust' (:func:`robust_scale`: only the scale ignores the gross errors)."""
     e, t = np.asarray(estimate, float)[mask], np.asarray(truth, float)[mask]
     if e.size == 0:
         return None
-    mse = float(np.mean((e * lstsq_scale(e, t)[None] - t) ** 2))
+    scale = lstsq_scale(e, t) if gauge == "lstsq" else robust_scale(e, t)[0]
+    mse = float(np.mean((e * scale[None] - t) ** 2))
     return psnr_db(mse, 1.0)
 
 

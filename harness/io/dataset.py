@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image
 
-from estimator import Camera, InputError, MultiViewData, TriangleMesh, View, backend
+from estimator import Camera, InputError, MultiViewData, TriangleMesh, View
 from harness.io.exr import read_exr, write_exr
+from harness.io.images import read_linear_rgb
 from harness.io.jsonio import load_json
 from harness.io.mesh import load_mesh_file, save_mesh_ply
 from reports.ground_truth import GroundTruth
@@ -201,20 +202,14 @@ LDR_FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
 
 def read_frame_image(path: str) -> np.ndarray:
     """A frame's image as float32 (H, W, 3 or 4): EXR as stored (linear); a PNG (8 or 16 bits
-    per channel) or JPEG as sRGB-encoded, linearised to [0, 1] (alpha linear). Mitsuba's
-    bitmap reader keeps a 16-bit PNG's depth (Pillow reduces 16-bit RGB to 8 bits and 16-bit
-    grey to 0/1 when converting it)."""
+    per channel) or JPEG as sRGB-encoded, linearised to [0, 1], alpha linear
+    (:func:`harness.io.images.read_linear_rgb`)."""
     if os.path.splitext(path)[1].lower() not in LDR_FRAME_EXTENSIONS:
         return read_exr(path)
-    mi = backend.set_variant()
     try:
-        bitmap = mi.Bitmap(path)
-    except Exception as exc:   # Mitsuba raises RuntimeError for unreadable or truncated files
-        raise DatasetError(f"cannot read image {path}: {exc}") from None
-    formats = mi.Bitmap.PixelFormat
-    alpha = bitmap.pixel_format() in (formats.RGBA, formats.YA)
-    linear = bitmap.convert(formats.RGBA if alpha else formats.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
-    return np.array(linear, dtype=np.float32)
+        return read_linear_rgb(path, alpha=True)
+    except InputError as exc:
+        raise DatasetError(str(exc)) from None
 
 
 def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[View]:
