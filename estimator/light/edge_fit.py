@@ -120,6 +120,8 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     labels = np.full(f, -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
     if labels.shape != (f,):
         raise InputError(f"labels must be (F,) = ({f},), got {labels.shape}")
+    # a face no light of these columns reaches (no sky seen, nothing added) cannot be explained
+    usable = usable & ((c_matrix[:, 0] > 0) if indirect is None else (c_matrix[:, 0] > 0) | np.all(indirect > 0, axis=1))
     i, j = usable_edges(edges, usable)
     member = np.nonzero(usable & (labels >= 0))[0]
     group = labels[member]
@@ -166,8 +168,10 @@ def _fit_channel(ell, c_matrix, incidence, member, group, regions, light, usable
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, incidence, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
-        normal, gradient = _normal_equations(c_matrix[:, first:] / shade[:, None], incidence, member, group,
-                                             regions, weights, residual)
+        # the log shading's gradient; 0 on faces outside the fit (their shading may be 0: a
+        # face that sees no sky), which no edge or region row reads
+        gradient_rows = np.where(usable[:, None], c_matrix[:, first:] / np.where(usable, shade, 1.0)[:, None], 0.0)
+        normal, gradient = _normal_equations(gradient_rows, incidence, member, group, regions, weights, residual)
         normal[:k, :k] += np.diag(penalty)
         gradient[:k] += penalty * light[first:]
         step = -np.linalg.solve(normal + 1e-12 * np.trace(normal) / n * np.eye(n), gradient)

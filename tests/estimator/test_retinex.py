@@ -92,3 +92,17 @@ def test_a_dc_only_light_has_nothing_to_fit():
         fit, region_albedo = log_shading_fit(radiance, c_matrix[:, :1], edges, np.ones(len(radiance), dtype=bool))
     np.testing.assert_array_equal(fit, np.ones((1, 3)))
     assert region_albedo.shape == (0, 3)
+
+
+def test_faces_no_light_reaches_are_left_out():
+    """A face that sees no sky (an all-zero diffuse row, e.g. inside a spout) but has a
+    positive radiance (light from the object itself) cannot be explained by the light: it
+    is left out instead of turning the normal equations into NaN."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    usable = np.ones(len(radiance), dtype=bool)
+    dark = np.arange(5, len(radiance), 37)
+    c_matrix[dark] = 0.0
+    radiance[dark] = 0.01                                                        # interreflected light
+    with np.errstate(all="raise"):
+        fit, _ = log_shading_fit(radiance, c_matrix, edges, usable)
+    np.testing.assert_allclose(fit, light / light[0], rtol=1e-4, atol=1e-5)

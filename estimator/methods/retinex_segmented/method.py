@@ -123,7 +123,9 @@ class RetinexSegmented(Method):
         c = self.config
         mesh, obs = prep.data.mesh, prep.obs
         radiance = group_quantile(obs.face, obs.rgb, mesh.num_faces, c.retinex_quantile)
-        usable = np.all(np.isfinite(radiance) & (radiance > 0), axis=1)
+        # a face that sees no direction of the sky (its DC shading is 0) is lit only by the
+        # object itself: the direct light cannot explain its radiance, so it takes no part
+        usable = np.all(np.isfinite(radiance) & (radiance > 0), axis=1) & (prep.c_matrix[:, 0] > 0)
         if not usable.any():
             raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
         ctx = FitContext(prep, c, self.model, self.loss, fits, mesh.face_adjacency, usable,
