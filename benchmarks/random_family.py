@@ -2,6 +2,7 @@
 
     python benchmarks/random_family.py --seeds 1000-1019 [--methods retinex-segmented,bilinear-clustered]
                                        [--profile tiny] [--out DIR] [--name NAME]
+                                       [--set KEY=VALUE ...]
 
 Develop on seeds 1000 and up; report on seeds 0-99, measured once. Each seed's dataset is
 generated once into DIR (reused when present). Prints one row per seed and method (its strata,
@@ -9,7 +10,8 @@ diffuse-albedo PSNR after a per-channel least-squares scale, share of faces with
 on uniform-region scenes, estimated share, estimate time), then per method the distribution
 over seeds (median, 5th percentile, minimum; the share of seeds with >= 90 % of faces within
 ±10 %) overall and per stratum (light, material, albedo, geometry and camera layout). Rows
-go to DIR/NAME.json.
+go to DIR/NAME.json. ``--set`` changes an estimator setting for every method (a design
+choice measured over the family); VALUE is read as JSON, else kept as text.
 """
 from __future__ import annotations
 
@@ -43,7 +45,19 @@ def seeds(text: str) -> list[int]:
     return out
 
 
-def run_seed(seed: int, methods: list[str], out: str, profile: str | None) -> list[dict]:
+def setting(text: str) -> tuple[str, object]:
+    """'KEY=VALUE' -> (KEY, VALUE read as JSON, else the text)."""
+    key, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"--set takes KEY=VALUE, got {text!r}")
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
+
+
+def run_seed(seed: int, methods: list[str], out: str, profile: str | None,
+             overrides: dict | None = None) -> list[dict]:
     folder = os.path.join(out, f"random-{seed:04d}")
     if not os.path.isdir(folder):
         generate(random_spec(seed, profile), folder)
@@ -52,7 +66,7 @@ def run_seed(seed: int, methods: list[str], out: str, profile: str | None) -> li
     strata = draw(seed)[1]
     rows = []
     for method in methods:
-        name, config = estimator_settings(ds.meta, method)
+        name, config = estimator_settings(ds.meta, method, overrides)
         t = time.perf_counter()
         try:
             est = estimate(ds.data, name, config)
@@ -93,10 +107,11 @@ def main() -> None:
     p.add_argument("--profile", help="'tiny' for a quick look (128², 16 spp)")
     p.add_argument("--out", default="out/bench-random")
     p.add_argument("--name", default="random_family")
+    p.add_argument("--set", type=setting, action="append", default=[], metavar="KEY=VALUE")
     args = p.parse_args()
     rows = []
     for seed in seeds(args.seeds):
-        rows.extend(run_seed(seed, args.methods.split(","), args.out, args.profile))
+        rows.extend(run_seed(seed, args.methods.split(","), args.out, args.profile, dict(args.set)))
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, f"{args.name}.json"), "w") as f:
         json.dump(rows, f, indent=1)

@@ -4,8 +4,9 @@ scenes nobody tuned it on (``pseudolight generate random --seed N``).
 Each seed draws independently (:func:`draw`):
 
 * light: a shipped HDR probe at a random rotation; Mitsuba's ``sunsky`` with a random sun
-  elevation (10-70 degrees), azimuth and turbidity (2-8); or 1-4 spherical area lights of
-  random size, colour temperature (2500-9000 K) and power on a dim uniform environment; the
+  elevation (10-70 degrees), azimuth and turbidity (2-8); or 1-4 distant spherical area lights
+  (40-100 object radii away, half-angle 2-9 degrees) of random colour temperature (2500-9000 K)
+  and power on a dim uniform environment; the
   probe and the spheres get a random colour cast (``tint``);
 * material: Mitsuba's ``diffuse``, ``plastic``, ``roughplastic`` (alpha 0.05-0.5), the
   project's Phong (exponent 5-100, white specular 0.1-0.3), or mixed: each region its own;
@@ -117,7 +118,11 @@ def _light(rng: np.random.Generator, kind: str) -> dict:
     lights = []
     for _ in range(int(rng.integers(1, 5))):
         direction = _direction(rng.uniform(-20, 80), rng.uniform(0, 2 * np.pi))
-        distance, radius = rng.uniform(6, 9), rng.uniform(0.3, 1.0)   # beyond the cameras (4): never in front
+        # distant, as the method's light is (a direction's radiance, the same at every point):
+        # from 40-100 object radii a sphere's irradiance varies by at most 4 R / d = 10 % across
+        # the object (1 / d^2) and its direction by 1.4 degrees; half-angle 2-9 degrees
+        distance = rng.uniform(40, 100)
+        radius = distance * np.sin(np.radians(rng.uniform(2, 9)))
         # radiance for an irradiance of 1-4 at the origin: E = L pi sin^2(half angle)
         irradiance = rng.uniform(1, 4)
         radiance = irradiance / (np.pi * (radius / distance) ** 2)

@@ -36,7 +36,9 @@ def decide_light(ctx: FitContext, radiance: np.ndarray, found: Sun | None) -> Hy
         if taken is not None:
             return taken
     elif lobe is not None:
-        return lobe_hypothesis(ctx, edges, lobe)
+        taken = lobe_hypothesis(ctx, edges, lobe)   # None: the lobe left no positive diffuse radiance
+        if taken is not None:
+            return taken
     if edges.source is LightSource.EDGES and not edges.regions:
         coated = coated_diffuse_hypothesis(ctx, edges)
         if coated is not None:

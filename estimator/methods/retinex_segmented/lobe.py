@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.errors import InputError
 from ...core.reductions import group_quantile
 from ...light import edge_fit, lobe_light, sun
 from ...model.reflection import diffuse_matrix, lobe_matrix, mirror_directions, phong_lobe
@@ -49,14 +50,18 @@ def lobe_rows(ctx: FitContext, obs: Observations, rows: np.ndarray) -> np.ndarra
                        prep.visibility, ctx.config.sh_order, ctx.config.phong_exponent)
 
 
-def lobe_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: lobe_light.LobeLight) -> Hypothesis:
+def lobe_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: lobe_light.LobeLight) -> Hypothesis | None:
     """The light of the lobe's fit ``fitted`` (:func:`lobe_reflected_light`) and each face's
     diffuse radiance under it;
     regions found under the edges' light saw the lobe's reflection as albedo, so they are found
     again, and each takes its faces' median albedo when they deviate from it by at most
-    ``region_max_deviation``."""
+    ``region_max_deviation``. None: the lobe's light leaves no positive diffuse radiance in
+    some channel (the lobe took the diffuse too: not a lobe)."""
     c = ctx.config
-    radiance, light, shading = lobe_reflected_light(ctx, fitted, edges.found)
+    try:
+        radiance, light, shading = lobe_reflected_light(ctx, fitted, edges.found)
+    except InputError:
+        return None
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
     labels, _ = segment(np.where(lit[:, None], albedo, 1.0), ctx.edges, lit, c.segment_threshold, c.uniform_spread)
     share, regions = float(np.mean(labels[lit] >= 0)), int(labels.max()) + 1
@@ -104,8 +109,13 @@ def lobe_reflected_light(ctx: FitContext, fitted: lobe_light.LobeLight,
         lobe = phong_lobe(mirror, found.direction[None, :], c.phong_exponent) * share[obs.face, None]   # (N, 1)
         with_sun = lobe_light.fit_lobe_light(obs.face, obs.rgb, np.hstack([rows, lobe]), obs.num_faces,
                                              loss=ctx.loss)
+        trial = None
         if np.all(with_sun.light[-1] > 0):
-            trial = split(with_sun, np.hstack([plain, shading[:, None]]))
+            try:
+                trial = split(with_sun, np.hstack([plain, shading[:, None]]))
+            except InputError:   # the sun's lobe leaves no positive diffuse radiance: not this sun
+                pass
+        if trial is not None:
             ratio = edge_fit.edge_cost_ratio(
                 edge_fit.edge_residuals(diffuse, plain @ light, ctx.edges, ctx.usable),
                 edge_fit.edge_residuals(trial[1], np.maximum(trial[2] @ trial[0], 1e-300), ctx.edges, ctx.usable))
