@@ -34,6 +34,7 @@ from . import edge_fit
 SAMPLE_POINTS = 6       # shadow rays per face for its lit share
 SEARCH_STEPS_DEG = (6.0, 3.0, 1.5)
 MAX_MOVES = 10          # per ring size: a flat cost (no sun) must not wander
+SUN_PARAMETERS = 5      # a direction (2) and an irradiance per channel (3)
 
 
 @dataclass
@@ -43,11 +44,13 @@ class SunConfig(Section):
     Attributes
     ----------
     sun_min_gain : a sun (a delta light with exact cast shadows beside the SH light) is kept
-        when it lowers the edge fit's robust cost by at least this fraction; 1 turns the
-        search off.
+        when it explains the edges (:attr:`Sun.explains`: the drop of their Cauchy negative
+        log-likelihood exceeds the Bayesian information criterion's price of the sun's
+        unknowns) and lowers the edge fit's robust cost by at least this fraction (0: the
+        criterion alone); 1 turns the search off.
     """
 
-    sun_min_gain: float = 0.15
+    sun_min_gain: float = 0.0
 
     def check(self):
         return [(0 <= self.sun_min_gain <= 1, "sun_min_gain must lie in [0, 1]")]
@@ -63,12 +66,24 @@ class Sun:
     cost_ratio : robust edge cost with the sun over the cost without it (< 1: it helps).
     evaluations : edge fits the search ran.
     coat_ior : the index of the dielectric coat its light passes (None: a bare surface).
+    gain : how much the sun lowers the edge cost, sum log(1 + (r / s)^2) at the sunless fit's
+        scales: the drop of the residuals' Cauchy negative log-likelihood.
+    penalty : the Bayesian information criterion's price of the sun's :data:`SUN_PARAMETERS`
+        unknowns, (k / 2) ln n over the n edge residuals; the sun :attr:`explains` the data
+        when ``gain`` exceeds it.
     """
 
     direction: np.ndarray
     cost_ratio: float
     evaluations: int
     coat_ior: float | None = None
+    gain: float = np.inf
+    penalty: float = 0.0
+
+    @property
+    def explains(self) -> bool:
+        """Whether the sun lowers the edges' negative log-likelihood by more than its BIC price."""
+        return self.gain > self.penalty
 
 
 def sun_shading(mesh: TriangleMesh, caster: RayCaster, direction: np.ndarray, coat_ior: float | None = None,
@@ -124,8 +139,9 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
     Returns
     -------
     Sun, with the cost ratio against the same fit without a sun: sum log(1 + (r / s)^2)
-    over the edge residuals r, with each channel's robust scale s fixed by the sunless fit.
-    A trial whose fitted sun irradiance is not positive in every channel costs infinity.
+    over the edge residuals r, with each channel's robust scale s fixed by the sunless fit;
+    the cost's drop (``gain``) and its BIC ``penalty``. A trial whose fitted sun irradiance
+    is not positive in every channel costs infinity.
     """
     low = c_matrix[:, :sh.num_coeffs(order)]
     fit = dict(loss=loss, iterations=iterations)
@@ -173,7 +189,9 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
         if coated < best:
             d, best, more = descend(d, coated, coat_ior, steps_deg[-1:])
             ior, evaluations = coat_ior, evaluations + more
-    return Sun(d, best / max(base_cost, 1e-300), evaluations, ior)
+    residuals = int(np.isfinite(base).all(axis=1).sum()) * base.shape[1]
+    return Sun(d, best / max(base_cost, 1e-300), evaluations, ior, gain=base_cost - best,
+               penalty=0.5 * SUN_PARAMETERS * np.log(max(residuals, 2)))
 
 
 def _tangent_frame(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -14,8 +14,8 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
     """The light fitted to the edges of ``radiance`` (F, 3) (:func:`edge_fit.log_shading_fit`).
 
     ``found``: the sun of an earlier fit (None: search for one when ``sun_min_gain`` < 1); it
-    joins the shading when it lowered the edge cost by ``sun_min_gain`` and its irradiance is
-    positive. Regions are then found under that light and, when they hold
+    joins the shading when it explains the edges (:attr:`sun.Sun.explains`), lowered their
+    cost by ``sun_min_gain`` and its irradiance is positive. Regions are then found under that light and, when they hold
     (:func:`tied_regions`), the light is fitted again with each region tied to one albedo."""
     c, prep = ctx.config, ctx.prep
     mesh = prep.data.mesh
@@ -24,7 +24,7 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
         found = sun.find_sun(radiance, shading.columns, ctx.edges, ctx.usable, mesh, prep.caster,
                              prep.sampling.directions, loss=ctx.loss,
                              coat_ior=c.coat_ior if c.coat_correction else None)
-    if found is not None and found.cost_ratio <= 1 - c.sun_min_gain:
+    if found is not None and found.explains and found.cost_ratio <= 1 - c.sun_min_gain:
         shading = shading.with_sun(found, sun.sun_shading(mesh, prep.caster, found.direction, found.coat_ior))
     light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
     if shading.sun is not None and np.any(light[-1] <= 0):   # no dark "sun"

@@ -109,7 +109,7 @@ class RetinexSegmented(Method):
             if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
                 s = est.info["sun"]
                 found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
-                                      c.coat_ior if s["through_coat"] else None)
+                                      c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
                 est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), fits, found)
             else:
                 weight = np.zeros(3)  # negligible: not applied

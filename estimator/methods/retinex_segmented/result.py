@@ -22,6 +22,7 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     found, light = h.found, h.light
     used = h.shading.sun is not None
     sun_info = None if found is None else {"direction": found.direction.tolist(), "cost_ratio": found.cost_ratio,
+                                            "gain": found.gain, "penalty": found.penalty,
                                             "evaluations": found.evaluations, "used": used,
                                             "through_coat": found.coat_ior is not None}
     irradiance = light[m:m + 1]
