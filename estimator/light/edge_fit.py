@@ -121,7 +121,8 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     if labels.shape != (f,):
         raise InputError(f"labels must be (F,) = ({f},), got {labels.shape}")
     # a face no light of these columns reaches (no sky seen, nothing added) cannot be explained
-    usable = usable & ((c_matrix[:, 0] > 0) if indirect is None else (c_matrix[:, 0] > 0) | np.all(indirect > 0, axis=1))
+    reached = c_matrix[:, 0] > 0
+    usable = usable & (reached if indirect is None else reached | np.all(indirect > 0, axis=1))
     i, j = usable_edges(edges, usable)
     member = np.nonzero(usable & (labels >= 0))[0]
     group = labels[member]
