@@ -105,7 +105,8 @@ class RetinexSegmented(Method):
                                   est.light, c.coat_order, c.coat_ior)
             # a material per region: each uniform region its own coat weight (faces outside
             # every region share one), so a matte part keeps its colour beside a coated one
-            group = np.where(est.labels >= 0, est.labels, max(int(est.labels.max()) + 1, 0))[obs.face]
+            regions = est.info["uniform_regions"]     # labels beyond them are free faces, one each
+            group = np.where((est.labels >= 0) & (est.labels < regions), est.labels, regions)[obs.face]
             per_group = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, groups=group)
             weighted = per_group[group] * rows
             scale = coat.admissible_scale(obs.rgb, weighted, c.coat_max_negative)
