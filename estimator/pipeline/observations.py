@@ -120,6 +120,11 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         to_cam = view.camera.center[None] - centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         parts.append((faces, sums[faces] / counts[faces, None], to_cam, np.full(len(faces), index)))
+    clear = [view.name for view in views if view.alpha is not None and not np.any(view.alpha >= min_alpha)]
+    if clear:
+        raise InputError(f"{len(clear)} view(s) are fully transparent (alpha below {min_alpha} everywhere): "
+                         f"{', '.join(clear[:5])}{' ...' if len(clear) > 5 else ''}; check their alpha channel "
+                         "or drop them from the dataset")
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
     if len(blind) == len(views):
         raise InputError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")

@@ -198,6 +198,13 @@ def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | 
                                   config.negative_tolerance)
     normals = data.mesh.face_normals
     cos_view = np.sum(normals[all_obs.face] * all_obs.view_dir, axis=1)
+    # the first surface a camera ray hits faces the camera, so on a mesh wound outwards the
+    # front-facing pairs outnumber the back-facing ones (an open mesh shows a few insides)
+    behind = int(np.sum(cos_view < 0))
+    if behind > len(cos_view) - behind:
+        raise InputError(f"{behind} of the {len(cos_view)} observed (face, view) pairs see their face from behind its "
+                         "normal: the mesh's faces are wound the other way (normals point inwards); reverse the "
+                         "winding, e.g. trimesh's mesh.invert()")
     obs = all_obs.subset(cos_view > config.min_cos_view)
     if len(obs.face) == 0:
         raise InputError(f"no observation passes min_cos_view={config.min_cos_view}")

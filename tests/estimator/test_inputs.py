@@ -47,6 +47,25 @@ def test_cameras_that_see_nothing_are_refused():
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 
+def test_a_mesh_wound_inwards_is_named():
+    """Normals pointing inwards: every visible face is seen from behind, and the error says
+    the winding is reversed rather than blaming the poses or min_cos_view."""
+    mesh = sphere(1)
+    inward = TriangleMesh(mesh.vertices, mesh.faces[:, ::-1])
+    data = MultiViewData(inward, [View("v", CAM, np.ones((12, 16, 3)))])
+    with pytest.raises(ValueError, match="wound the other way"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+    estimate(MultiViewData(mesh, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
+             EstimatorConfig(sh_order=2, directions=50))                       # outward: accepted
+
+
+def test_a_fully_transparent_view_is_named():
+    clear = View("clear", CAM, np.ones((12, 16, 3)), alpha=np.zeros((12, 16)))
+    data = MultiViewData(sphere(1), [View("good", CAM, np.ones((12, 16, 3))), clear])
+    with pytest.raises(ValueError, match="1 view.s. are fully transparent .* clear"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+
+
 def test_observations_are_per_face_means_of_pure_pixels():
     mesh = sphere(1)
     caster = RayCaster(mesh)
