@@ -67,36 +67,25 @@ def coat_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, orde
 
 
 def fit_coat(face: np.ndarray, rgb: np.ndarray, rows: np.ndarray, num_faces: int, loss: str = "cauchy",
-             rounds: int = 5, groups: np.ndarray | None = None) -> np.ndarray:
-    """Weight k_c >= 0 of ``rows`` (N, 3) in the colours ``rgb`` (N, 3) of faces ``face``
-    (N,): least squares on each face's deviations from its mean over views, reweighted by
-    ``loss`` (glints and shadows the coat term does not explain).
-
-    ``groups`` (N,) int >= 0: one weight per group of rows (a material per region: a matte
-    region's weight comes out near 0, a coated one's near its coat's), returned (G, 3);
-    None: one weight for every row, returned (3,)."""
+             rounds: int = 5) -> np.ndarray:
+    """(3,) weight k_c >= 0 of ``rows`` (N, 3) in the colours ``rgb`` (N, 3) of faces
+    ``face`` (N,): least squares on each face's deviations from its mean over views,
+    reweighted by ``loss`` (glints and shadows the coat term does not explain)."""
     counts = np.maximum(np.bincount(face, minlength=num_faces), 1).astype(float)
 
     def deviation(values):
         mean = np.stack([np.bincount(face, values[:, k], minlength=num_faces) for k in range(3)], 1) / counts[:, None]
         return values - mean[face]
 
-    group = np.zeros(len(face), dtype=np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
-    g = int(group.max()) + 1 if len(group) else 1
     x, y = deviation(rows), deviation(rgb)
     weights = np.ones(len(face))
-    k = np.zeros((g, 3))
-
-    def per_group(values):
-        return np.stack([np.bincount(group, values[:, c], minlength=g) for c in range(3)], 1)
-
+    k = np.zeros(3)
     for _ in range(rounds):
         wx = weights[:, None] * x
-        k = per_group(wx * y) / np.maximum(per_group(wx * x), 1e-300)
-        residual = np.linalg.norm(y - k[group] * x, axis=1)
+        k = np.sum(wx * y, axis=0) / np.maximum(np.sum(wx * x, axis=0), 1e-300)
+        residual = np.linalg.norm(y - k * x, axis=1)
         weights = robust.irls_weights(residual, loss, robust.robust_scale(residual, floor=1e-12))
-    k = np.maximum(k, 0.0)
-    return k[0] if groups is None else k
+    return np.maximum(k, 0.0)
 
 
 def admissible_scale(rgb: np.ndarray, coat: np.ndarray, max_negative: float, steps: int = 20) -> float:

@@ -49,20 +49,3 @@ def test_admissible_scale_caps_what_turns_negative():
     share = np.mean(np.any(rgb - t * coat <= 0, axis=1))
     assert share <= 0.01 and 0.49 < t < 0.51     # rows turn <= 0 where coat >= 0.1 / t: t ~ 0.505 at 1 %
     assert admissible_scale(rgb, np.full_like(rgb, 0.05), 0.0) == 1.0          # harmless: the whole weight
-
-
-def test_each_group_gets_its_own_coat_weight():
-    """A material per region: rows of a coated group and of a matte one (no coat term in its
-    colours) give that group's weight each; one weight for both would darken the matte part."""
-    rng = np.random.default_rng(4)
-    faces, views = 300, 8
-    face = np.repeat(np.arange(faces), views)
-    x = rng.uniform(0.0, 0.3, size=(len(face), 3))
-    matte = face >= faces // 2
-    true_k = np.where(matte[:, None], 0.0, np.array([0.9, 0.7, 0.5]))
-    rgb = rng.uniform(0.05, 0.8, size=(faces, 3))[face] + true_k * x
-    k = fit_coat(face, rgb, x, faces, groups=matte.astype(np.int64))
-    assert k.shape == (2, 3)
-    np.testing.assert_allclose(k, [[0.9, 0.7, 0.5], [0.0, 0.0, 0.0]], atol=2e-3)
-    one = fit_coat(face, rgb, x, faces)
-    assert one.shape == (3,) and np.all(one > 0.2)                   # shared: the matte half would lose colour

@@ -103,21 +103,14 @@ class RetinexSegmented(Method):
             obs = prep.obs
             rows = coat.coat_rows(prep.data.mesh.face_normals[obs.face], obs.view_dir,
                                   est.light, c.coat_order, c.coat_ior)
-            # a material per region: each uniform region its own coat weight (faces outside
-            # every region share one), so a matte part keeps its colour beside a coated one
-            regions = est.info["uniform_regions"]     # labels beyond them are free faces, one each
-            group = np.where((est.labels >= 0) & (est.labels < regions), est.labels, regions)[obs.face]
-            per_group = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, groups=group)
-            weighted = per_group[group] * rows
-            scale = coat.admissible_scale(obs.rgb, weighted, c.coat_max_negative)
-            weight, weighted = scale * np.median(per_group[group], axis=0), scale * weighted
-            coat_level = np.median(np.linalg.norm(weighted, axis=1))
+            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss)
+            weight = weight * coat.admissible_scale(obs.rgb, weight * rows, c.coat_max_negative)
+            coat_level = np.median(np.linalg.norm(weight * rows, axis=1))
             if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
                 s = est.info["sun"]
                 found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
                                       c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
-                est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weighted)), fits, found)
-                est.info["coat_weight_regions"] = (scale * per_group).tolist()
+                est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), fits, found)
             else:
                 weight = np.zeros(3)  # negligible: not applied
         est.info["coat_weight"] = weight.tolist()
