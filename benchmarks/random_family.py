@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import numpy as np  # noqa: E402
-from scoring import score  # noqa: E402
+from scoring import score, setting  # noqa: E402
 
 from estimator import InputError, estimate  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
@@ -43,17 +43,6 @@ def seeds(text: str) -> list[int]:
         lo, _, hi = part.partition("-")
         out.extend(range(int(lo), int(hi or lo) + 1))
     return out
-
-
-def setting(text: str) -> tuple[str, object]:
-    """'KEY=VALUE' -> (KEY, VALUE read as JSON, else the text)."""
-    key, sep, value = text.partition("=")
-    if not sep:
-        raise argparse.ArgumentTypeError(f"--set takes KEY=VALUE, got {text!r}")
-    try:
-        return key, json.loads(value)
-    except json.JSONDecodeError:
-        return key, value
 
 
 def run_seed(seed: int, methods: list[str], out: str, profile: str | None,

@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import numpy as np  # noqa: E402
-from scoring import score  # noqa: E402
+from scoring import score, setting  # noqa: E402
 
 from estimator import estimate  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
@@ -57,14 +57,11 @@ def main() -> None:
     p.add_argument("--probes", default="lab,park,studio,city,sunrise,apartment")
     p.add_argument("--rotations", default="0,120")
     p.add_argument("--methods", default="bilinear-clustered")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="estimator setting for every method (value parsed as JSON)")
+    p.add_argument("--set", type=setting, action="append", default=[], metavar="KEY=VALUE",
+                   help="estimator setting for every method (value read as JSON, else text)")
     p.add_argument("--name", default="real_light", help="basename of the written .json")
     args = p.parse_args()
-    overrides = {}
-    for item in args.set:
-        key, _, value = item.partition("=")
-        overrides[key] = json.loads(value)
+    overrides = dict(args.set)
     rows = []
     for material in args.materials.split(","):
         for probe in args.probes.split(","):

@@ -1,5 +1,9 @@
-"""The benchmarks' common scoring of one estimate against its ground truth."""
+"""What the benchmarks share: the scoring of one estimate against its ground truth, and the
+``--set KEY=VALUE`` estimator setting."""
 from __future__ import annotations
+
+import argparse
+import json
 
 from reports import metrics
 from reports.ground_truth import evaluation_mask, true_irradiance
@@ -19,3 +23,14 @@ def score(ds, truth, est, component: str = "diffuse") -> dict:
     return {"psnr": metrics.albedo_psnr(estimated, true, mask),
             "within_10": metrics.ratio_summary(lstsq[:, 3])["within_10"], "ari": ari,
             "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}
+
+
+def setting(text: str) -> tuple[str, object]:
+    """``--set`` argument type: 'KEY=VALUE' -> (KEY, VALUE read as JSON, else the text)."""
+    key, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"--set takes KEY=VALUE, got {text!r}")
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value

@@ -15,8 +15,9 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
 
     ``found``: the sun of an earlier fit (None: search for one when ``sun_min_gain`` < 1); it
     joins the shading when it explains the edges (:attr:`sun.Sun.explains`), lowered their
-    cost by ``sun_min_gain`` and its irradiance is positive. Regions are then found under that light and, when they hold
-    (:func:`tied_regions`), the light is fitted again with each region tied to one albedo."""
+    cost by ``sun_min_gain`` and its irradiance is positive. Regions are then found under that
+    light and, when they hold (:func:`tied_regions`), the light is fitted again with each
+    region tied to one albedo."""
     c, prep = ctx.config, ctx.prep
     mesh = prep.data.mesh
     shading = Shading(prep.c_matrix)
