@@ -18,6 +18,7 @@ from estimator import Camera, InputError, MultiViewData, TriangleMesh, View
 from harness.io.exr import read_exr, write_exr
 from harness.io.images import read_linear_rgb
 from harness.io.jsonio import load_json
+from harness.io.lens import CAMERA_MODELS, COEFFICIENTS, Lens, undistort_image
 from harness.io.mesh import load_mesh_file, save_mesh_ply
 from reports.ground_truth import GroundTruth
 
@@ -135,29 +136,31 @@ def _number(where: str, key: str, value) -> float:
     return float(value)
 
 
-DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")   # nerfstudio's OPENCV / OPENCV_FISHEYE parameters
-
-
-def _check_camera_model(where: str, frame: dict, top: dict) -> None:
-    """Only pinhole cameras without lens distortion are read: a distorted image would put each
-    pixel's colour on the wrong face. Any other model, or a non-zero distortion coefficient, is
-    refused naming the key (undistort the images first, e.g. COLMAP's image_undistorter)."""
+def _lens(where: str, frame: dict, top: dict) -> Lens | None:
+    """The frame's lens distortion (frame keys win over top-level ones), or None for a
+    pinhole camera. Only nerfstudio's camera models are read; any other is refused."""
     model = frame.get("camera_model", top.get("camera_model", "PINHOLE"))
-    if model not in ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "OPENCV_FISHEYE"):
-        raise DatasetError(f"{where}: camera_model {model!r} is not supported (only pinhole cameras; undistort the "
-                           "images first)")
-    for key in DISTORTION_KEYS:
-        value = frame.get(key, top.get(key, 0.0))
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or value != 0:
-            raise DatasetError(f"{where}: lens distortion {key} = {value!r} ({model}) is not supported: undistort "
-                               "the images first (e.g. COLMAP's image_undistorter) and write a PINHOLE camera")
-    if model == "OPENCV_FISHEYE":
-        raise DatasetError(f"{where}: camera_model 'OPENCV_FISHEYE' is not supported (a fisheye projection is not "
-                           "a pinhole one, even without distortion coefficients)")
+    if model not in CAMERA_MODELS:
+        raise DatasetError(f"{where}: camera_model {model!r} is not supported (one of {', '.join(CAMERA_MODELS)}; "
+                           "undistort the images first, e.g. with COLMAP's image_undistorter)")
+    values = {key: frame.get(key, top.get(key, 0.0)) for key in COEFFICIENTS}
+    for key, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            raise DatasetError(f"{where}: lens distortion {key} must be a finite number, got {value!r}")
+    if model in ("PINHOLE", "SIMPLE_PINHOLE"):
+        if any(values.values()):
+            key = next(k for k, v in values.items() if v)
+            raise DatasetError(f"{where}: camera_model {model!r} has no lens distortion, but {key} = "
+                               f"{values[key]!r}; write camera_model OPENCV (or OPENCV_FISHEYE) for a distorted lens")
+        return None
+    try:
+        lens = Lens(model, **{k: float(v) for k, v in values.items()})
+    except InputError as exc:
+        raise DatasetError(f"{where}: {exc}") from None
+    return None if lens.is_identity else lens
 
 
 def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
-    _check_camera_model(where, frame, top)
     values = {}
     for key in _INTRINSIC_KEYS:
         value = frame.get(key, top.get(key))
@@ -212,6 +215,17 @@ def read_frame_image(path: str) -> np.ndarray:
         raise DatasetError(str(exc)) from None
 
 
+def _undistorted(where: str, image: np.ndarray, cam: Camera, lens: Lens) -> np.ndarray:
+    """The pinhole image (H, W, 4) of a distorted frame: pixels whose source lies outside
+    the frame get alpha 0, so they add no observation."""
+    if image.shape[2] == 3:
+        image = np.concatenate([image, np.ones(image.shape[:2] + (1,), image.dtype)], axis=2)
+    try:
+        return undistort_image(image, cam.fx, cam.fy, cam.cx, cam.cy, lens)[0]
+    except InputError as exc:
+        raise DatasetError(f"{where}: {exc}") from None
+
+
 def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[View]:
     """The views of a frame list; every image path read is appended to ``files``."""
     if not isinstance(frames, list):
@@ -224,12 +238,18 @@ def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[V
         if not isinstance(frame.get("file_path"), str) or not frame["file_path"]:
             raise DatasetError(f"{where}: file_path missing or not a string")
         cam = _intrinsics(where, frame, top)
+        lens = _lens(where, frame, top)
         path = os.path.join(folder, frame["file_path"])
         if not os.path.splitext(path)[1]:
             path += ".exr"
         if not os.path.isfile(path):
             raise DatasetError(f"{where}: image not found: {path}")
         image = read_frame_image(path)
+        if image.shape[:2] != (cam.height, cam.width):
+            raise DatasetError(f"{path}: image is {image.shape[1]}x{image.shape[0]}, {where} says "
+                               f"{cam.width}x{cam.height}")
+        if lens is not None:
+            image = _undistorted(where, image, cam, lens)
         alpha = image[..., 3] if image.shape[2] == 4 else None
         try:
             views.append(View(frame["file_path"], cam, image[..., :3], alpha))

@@ -15,7 +15,7 @@ from harness.io.images import read_linear_rgb
 from harness.scene import geometry
 from harness.scene.faults import apply_faults
 from harness.scene.illumination import Illumination, build_illumination
-from harness.scene.render import build_scene, make_cameras, render_views
+from harness.scene.render import build_scene, make_cameras, render_through_lens, render_views
 from harness.scene.spec import AlbedoSpec, SceneSpec, SpecError
 from harness.scene.textures import (
     pattern_albedo,
@@ -90,6 +90,9 @@ class GeneratedScene:
         scene = build_scene(self.mesh, self.diffuse, self.specular, material_dict(self.spec.material, self.regions),
                             light,
                             cameras[0], r.spp, r.resolved_integrator(self.spec.illumination), r.max_depth)
+        lens = self.spec.cameras.lens()
+        if lens is not None:
+            return render_through_lens(scene, cameras, lens, r.spp, self.spec.seed, desc)
         return render_views(scene, cameras, r.spp, self.spec.seed, desc)
 
 
@@ -190,6 +193,8 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         t2 = time.perf_counter()
         meta = {"scene": spec.name, "generator": "pseudolight", "variant": backend.active_variant(),
                 "spp": spec.render.spp, "seed": spec.seed, "estimator_defaults": spec.estimator}
+        if spec.cameras.lens() is not None:   # the images are as the lens recorded them: readers undistort them
+            meta.update(spec.cameras.lens().as_json())
         mesh, views, ldr = scene.mesh, list(zip(train_cams, train)), None
         if spec.faults.active:
             mesh, views, test_cams, ldr, meta["faults"] = apply_faults(spec.faults, spec.seed, mesh, views, test_cams)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from estimator import InputError
+from harness.io.lens import COEFFICIENTS, Lens, source_pixels
 from harness.scene.geometry import GEOMETRY_KINDS
 from harness.scene.illumination import SPEC_TYPES
 
@@ -337,6 +338,19 @@ class CameraSpec:
     elevation: float = 20.0
     min_elevation: float = 8.0
     max_elevation: float = 65.0
+    lens_model: str = "PINHOLE"
+    k1: float = 0.0
+    k2: float = 0.0
+    k3: float = 0.0
+    k4: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+
+    def lens(self) -> Lens | None:
+        """The distorting lens every view is rendered through, or None for a pinhole."""
+        if self.lens_model == "PINHOLE":
+            return None
+        return Lens(self.lens_model, **{key: float(getattr(self, key)) for key in COEFFICIENTS})
 
     def validate(self) -> None:
         _num("cameras.count", self.count, 1, 10000, integer=True)
@@ -349,6 +363,18 @@ class CameraSpec:
         _num("cameras.width", self.width, 8, 8192, integer=True)
         _num("cameras.height", self.height, 8, 8192, integer=True)
         _num("cameras.elevation", self.elevation, -89, 89)
+        _choice("cameras.lens_model", self.lens_model, ("PINHOLE", "OPENCV", "OPENCV_FISHEYE"))
+        for key in COEFFICIENTS:
+            _num(f"cameras.{key}", getattr(self, key), -1, 1)
+            if self.lens_model == "PINHOLE" and getattr(self, key):
+                raise SpecError(f"cameras.{key} distorts the lens: set cameras.lens_model = 'OPENCV' (or "
+                                "'OPENCV_FISHEYE') with it")
+        if self.lens_model != "PINHOLE":
+            fx = 0.5 * self.width / np.tan(np.radians(0.5 * self.fov))
+            try:
+                source_pixels(self.lens(), self.width, self.height, fx, fx, 0.5 * self.width, 0.5 * self.height)
+            except InputError as exc:
+                raise SpecError(f"cameras.lens_model, k1..p2: {exc}") from None
 
 
 @dataclass
