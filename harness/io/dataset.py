@@ -19,7 +19,7 @@ from harness.io.exr import read_exr, write_exr
 from harness.io.images import read_linear_rgb
 from harness.io.jsonio import load_json
 from harness.io.lens import CAMERA_MODELS, COEFFICIENTS, Lens, undistort_image
-from harness.io.mesh import load_mesh_file, save_mesh_ply
+from harness.io.mesh import load_mesh_file, polygon_count, save_mesh_ply
 from reports.ground_truth import GroundTruth
 
 FORMAT_NAME = "pseudolight-dataset"
@@ -246,8 +246,8 @@ def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[V
             raise DatasetError(f"{where}: image not found: {path}")
         image = read_frame_image(path)
         if image.shape[:2] != (cam.height, cam.width):
-            raise DatasetError(f"{path}: image is {image.shape[1]}x{image.shape[0]}, {where} says "
-                               f"{cam.width}x{cam.height}")
+            raise DatasetError(f"{path}: image is {image.shape[1]}x{image.shape[0]} but the intrinsics say "
+                               f"{cam.width}x{cam.height} ({where})")
         if lens is not None:
             image = _undistorted(where, image, cam, lens)
         alpha = image[..., 3] if image.shape[2] == 4 else None
@@ -317,6 +317,24 @@ def read_ground_truth(folder: str, num_faces: int) -> GroundTruth | None:
                        brdf=info["brdf"], illumination=info["illumination"], regions=regions)
 
 
+def _check_distinct_frames(tpath: str, frames, test_frames) -> None:
+    """Refuse a frame listed twice (it would count its pixels twice and hide an underdetermined
+    solve) and a test frame among the training frames (the held-out score would see its own data)."""
+    seen: dict[str, str] = {}
+    for key, items in (("frames", frames), ("test_frames", test_frames)):
+        if not isinstance(items, list):
+            continue
+        for k, frame in enumerate(items):
+            path = frame.get("file_path") if isinstance(frame, dict) else None
+            if not isinstance(path, str):
+                continue
+            path = os.path.normpath(path)
+            if path in seen:
+                raise DatasetError(f"{tpath}: {key}[{k}] lists {frame['file_path']!r} again ({seen[path]}): each image "
+                                   "may appear once, and a test frame never among the training frames")
+            seen[path] = f"{key}[{k}]"
+
+
 def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: bool = True) -> Dataset:
     """Read a dataset folder; every missing or malformed part raises :class:`DatasetError`.
     ``Dataset.inputs`` lists the folder and every file read (mesh and images may lie elsewhere).
@@ -343,13 +361,22 @@ def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: 
     mesh_path = os.path.join(folder, mesh_name)
     if not os.path.isfile(mesh_path):
         raise DatasetError(f"{folder} has no mesh ({os.path.basename(mesh_path)} not found)")
+    declared = polygon_count(mesh_path)
     try:
         mesh = load_mesh_file(mesh_path)
     except InputError as exc:
+        if declared:
+            raise DatasetError(f"{mesh_path}: holds {declared} faces but no triangle; a dataset's mesh must be "
+                               "triangles (each face's index is its identity): triangulate it first") from None
         raise DatasetError(f"{mesh_path}: {exc}") from None
+    if declared is not None and declared != mesh.num_faces:
+        raise DatasetError(f"{mesh_path}: declares {declared} faces, which load as {mesh.num_faces} triangles: a "
+                           "dataset's mesh must be triangles (each face's index is its identity, and splitting "
+                           "polygons renumbers them); triangulate it first and keep that order")
     frames = top.get("frames", [])
     if not frames:
         raise DatasetError(f"{tpath} has no frames")
+    _check_distinct_frames(tpath, frames, top.get("test_frames", []))
     files = [mesh_path]
     views = _read_views(folder, frames, top, "frames", files)
     test_views = _read_views(folder, top.get("test_frames", []), top, "test_frames", files) if load_test else []

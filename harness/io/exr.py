@@ -22,8 +22,12 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) ->
     data = np.ascontiguousarray(image, dtype=np.float16 if half else np.float32)
     name = "RGBA" if data.shape[2] == 4 else "RGB"
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, {name: data}) as f:
-        f.write(str(path))
+    try:
+        with OpenEXR.File(header, {name: data}) as f:
+            f.write(str(path))
+    except RuntimeError as exc:   # OpenEXR reports a full disk or an unwritable file as a RuntimeError
+        reason = str(exc).rsplit(". ", 1)[-1].rstrip(".") if ". " in str(exc) else str(exc)
+        raise OSError(f"{os.path.basename(str(path))}: {reason}") from None
 
 
 def read_exr(path: str | os.PathLike) -> np.ndarray:

@@ -271,7 +271,8 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
         if kind == "twosided":
             return add(child_bsdf(element), weight)
         if kind == "blendbsdf":
-            w = float(_xml_value(element, "float", "weight", path))
+            _xml_value(element, "float", "weight", path)   # present, else named
+            w = float(_xml_floats(element.find("float[@name='weight']"), path, 1)[0])
             children = [resolve(c) for c in element if c.tag in ("bsdf", "ref")]
             if len(children) != 2 or not 0 <= w <= 1:
                 raise InputError(f"{path}: a blendbsdf needs two BSDFs and a constant weight in [0, 1]")
@@ -291,7 +292,11 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
         if emitter.get("type") == "envmap":
             radiance = _envmap_sh(os.path.join(folder, _xml_value(emitter, "string", "filename", path)), order)
             scale = emitter.find("float[@name='scale']")
-            radiance = radiance * (float(scale.get("value")) if scale is not None else 1.0)
+            factor = float(_xml_floats(scale, path, 1)[0]) if scale is not None else 1.0
+            if not 0 <= factor <= MAX_XML_SCALE:
+                raise InputError(f"{path}: <float name='scale'> of the envmap must lie in [0, {MAX_XML_SCALE:g}], "
+                                 f"got {factor:g}")
+            radiance = radiance * factor
             matrix = _xml_matrix(emitter, path)
             if matrix is not None:
                 radiance = sh.rotation_matrix(order, matrix[:3, :3]) @ radiance
@@ -303,6 +308,9 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
             out["radiance_sh"][0] = 2.0 * np.sqrt(np.pi) * (_xml_floats(value, path, 3) if value is not None else 1.0)
             break
     return out
+
+
+MAX_XML_SCALE = 1e12   # an envmap scale beyond it overflows the light's float64 SH products
 
 
 def _xml_value(element, tag: str, name: str, path: str) -> str:
@@ -335,6 +343,11 @@ def _xml_matrix(element, path: str) -> np.ndarray | None:
     return _xml_floats(children[0], path, 16).reshape(4, 4)
 
 
+# an imported albedo may carry any global scale (the reports fit one), but one above this is no
+# reflectance in any unit: its squared errors overflow the reports' sums
+MAX_IMPORTED_ALBEDO = 1e6
+
+
 def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float = 10000.0,
                       config: EstimatorConfig | None = None) -> Estimate:
     """An :class:`Estimate` of imported arrays (see :func:`read_per_face`), in the estimator's
@@ -346,6 +359,13 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
         raise InputError(f"--exponent must lie in (0, 1e6], got {exponent}")
     diffuse = arrays["diffuse"]
     specular = arrays["specular"] if arrays["specular"] is not None else np.zeros_like(diffuse)
+    for name, values in (("diffuse", diffuse), ("specular", specular)):
+        known = values[np.isfinite(values).all(axis=1)]
+        if np.any(known < 0) or np.any(known > MAX_IMPORTED_ALBEDO):
+            worst = int(np.argmax(np.any((values < 0) | (values > MAX_IMPORTED_ALBEDO), axis=1)))
+            raise InputError(f"{source}: {name} albedo of face {worst} is {values[worst].tolist()}: an albedo is a "
+                             f"reflectance, >= 0 (and at most {MAX_IMPORTED_ALBEDO:g} in any unit its light's "
+                             "scale allows)")
     m = sh.num_coeffs(config.sh_order)
     pseudo = np.zeros((m, 3))
     if arrays.get("pseudo_sh") is not None:

@@ -84,7 +84,8 @@ def distort(x: np.ndarray, y: np.ndarray, lens: Lens) -> tuple[np.ndarray, np.nd
 def undistort(xd: np.ndarray, yd: np.ndarray, lens: Lens, iterations: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """Distorted normalised coordinates -> undistorted ones: the inverse of :func:`distort`
     by Newton's method with a finite-difference Jacobian (no closed form exists), started
-    at the distorted point. Converges to ~1e-12 for the mild distortion of real lenses."""
+    at the distorted point, until no point moves by 1e-12 (a handful of steps for the
+    mild distortion of real lenses) or ``iterations`` steps."""
     xd, yd = np.asarray(xd, np.float64), np.asarray(yd, np.float64)
     x, y = xd.copy(), yd.copy()
     h = 1e-7
@@ -96,8 +97,10 @@ def undistort(xd: np.ndarray, yd: np.ndarray, lens: Lens, iterations: int = 20) 
         j11, j21, j12, j22 = (ax - fx) / h, (ay - fy) / h, (bx - fx) / h, (by - fy) / h
         det = j11 * j22 - j12 * j21
         det = np.where(np.abs(det) > 1e-12, det, 1e-12)
-        x = x - (j22 * ex - j12 * ey) / det
-        y = y - (j11 * ey - j21 * ex) / det
+        step_x, step_y = (j22 * ex - j12 * ey) / det, (j11 * ey - j21 * ex) / det
+        x, y = x - step_x, y - step_y
+        if max(np.max(np.abs(step_x), initial=0.0), np.max(np.abs(step_y), initial=0.0)) < 1e-12:
+            break
     return x, y
 
 

@@ -31,6 +31,27 @@ def load_mesh_with_uv(path: str | os.PathLike) -> tuple[TriangleMesh, np.ndarray
     return TriangleMesh(np.asarray(loaded.vertices), faces), uv
 
 
+def polygon_count(path: str | os.PathLike) -> int | None:
+    """The number of faces a PLY's header or an OBJ's ``f`` lines declare, whatever their
+    sides (None for other formats). Loading triangulates polygons, so a count above the
+    loaded triangles' means the file holds polygons of more than three sides."""
+    path = str(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".ply":
+        with open(path, "rb") as f:
+            for raw in f:
+                words = raw.split()
+                if words[:2] == [b"element", b"face"] and len(words) == 3 and words[2].isdigit():
+                    return int(words[2])
+                if raw.strip() == b"end_header":
+                    return None
+        return None
+    if ext == ".obj":
+        with open(path, "rb") as f:
+            return sum(1 for line in f if line.startswith(b"f ") or line.startswith(b"f\t"))
+    return None
+
+
 def save_mesh_ply(mesh: TriangleMesh, path: str | os.PathLike) -> None:
     """Write a binary PLY in the mesh's exact vertex and face order."""
     t = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)

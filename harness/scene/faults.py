@@ -173,8 +173,9 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
     test : the test cameras as written.
     ldr : per view, the (H, W, 4) uint8 sRGB image to write as PNG, or None.
     record : the fault parameters as applied, the seed and what was drawn (per-view pose
-        error, patch boxes), for ``transforms.json``; ``clamped`` lists a patch count that
-        asked for more views than there are (requested and applied).
+        error, exposure and white-balance gains, patch boxes), for ``transforms.json``;
+        ``clamped`` lists a patch count that asked for more views than there are (requested
+        and applied).
     """
     rng = np.random.default_rng([seed, faults.seed, 0x5EED])
     record: dict = {"spec": dataclasses.asdict(faults), "seed": [seed, faults.seed]}
@@ -185,8 +186,13 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
         rendered, mesh = mesh, decimate(mesh, faults.decimate)
         record["decimated"] = {"faces_rendered": rendered.num_faces, "faces_written": mesh.num_faces}
         record["face_source"] = nearest_faces(rendered, mesh)
-    out, pose_errors = [], []
+    out, pose_errors, gains = [], [], []
     for camera, image in train:
+        if faults.exposure_jitter > 0 or faults.white_balance_jitter > 0:
+            gain = np.exp(faults.exposure_jitter * rng.standard_normal() + faults.white_balance_jitter
+                          * rng.standard_normal(3))
+            image = np.concatenate([image[..., :3] * gain.astype(np.float32), image[..., 3:]], axis=2)
+            gains.append(gain.tolist())
         if faults.noise_read > 0 or faults.noise_shot > 0:
             image = add_noise(image, faults.noise_read, faults.noise_shot, rng)
         if faults.pose_rotation > 0 or faults.pose_translation > 0:
@@ -219,6 +225,7 @@ def apply_faults(faults: FaultSpec, seed: int, mesh: TriangleMesh, train: list[t
                 ldr[index] = to_ldr(image, white)
             out[index] = (camera, image)
     record["pose_errors"] = pose_errors
+    record["view_gains"] = gains
     record["patches"] = patches
     if faults.focal_error:
         test = [scale_focal(camera, faults.focal_error) for camera in test]

@@ -430,6 +430,10 @@ class FaultSpec:
         ``glare_size`` pixels where ``glare_value`` (absolute, linear) is added, centred on
         a random object pixel.
     occluder_views, occluder_size, occluder_value : likewise, patches replaced by the value.
+    exposure_jitter : auto-exposure: each training view is multiplied by exp(N(0, sigma))
+        (every channel alike), before noise and clipping.
+    white_balance_jitter : auto white balance: each channel of each training view is
+        multiplied by exp(N(0, sigma)) on top of the exposure.
     seed : added to the scene's seed for the fault draws.
     """
 
@@ -448,9 +452,13 @@ class FaultSpec:
     occluder_views: int = 0
     occluder_size: int = 32
     occluder_value: float = 0.0
+    exposure_jitter: float = 0.0
+    white_balance_jitter: float = 0.0
     seed: int = 0
 
     def validate(self) -> None:
+        _num("faults.exposure_jitter", self.exposure_jitter, 0, 2)
+        _num("faults.white_balance_jitter", self.white_balance_jitter, 0, 1)
         for key, top in (("noise_read", 10.0), ("noise_shot", 10.0), ("clip", 1e6), ("pose_translation", 1.0),
                          ("vertex_noise", 1.0)):
             _num(f"faults.{key}", getattr(self, key), 0, top)
@@ -474,7 +482,7 @@ class FaultSpec:
     def summary(self) -> str:
         """The faults that are on, as 'key value' pairs ('' when none is)."""
         on = {"noise_read", "noise_shot", "clip", "ldr", "pose_rotation", "pose_translation", "focal_error",
-              "vertex_noise", "decimate"}
+              "vertex_noise", "decimate", "exposure_jitter", "white_balance_jitter"}
         parts = [f"{k} {getattr(self, k)}" for k in sorted(on) if getattr(self, k)]
         for kind in ("glare", "occluder"):
             if getattr(self, f"{kind}_views"):

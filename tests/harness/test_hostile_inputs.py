@@ -657,3 +657,68 @@ def test_flag_messages_name_their_flag_or_variable(copy, tmp_path, capsys, monke
 
     with pytest.raises(InputError, match=r"\$PSEUDOLIGHT_VARIANT 'bogus'"):
         backend.resolve_variant()
+
+
+# ---------------------------------------------------------------- issue 26, second run
+
+@pytest.mark.parametrize("extra, needle", [("frames", "lists 'images/train_000.exr' again (frames[0])"),
+                                           ("test_frames", "test_frames[0] lists")])
+def test_a_frame_listed_twice_or_a_test_frame_in_training_is_refused(copy, tmp_path, capsys, extra, needle):
+    ds, _, _ = copy
+    record = json.loads((ds / "transforms.json").read_text())
+    if extra == "frames":
+        record["frames"].append(record["frames"][0])
+    else:
+        record["frames"].append(record["test_frames"][0])
+        needle = f"{needle} {record['test_frames'][0]['file_path']!r} again (frames["
+    (ds / "transforms.json").write_text(json.dumps(record))
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], needle, inputs=[ds], absent=[tmp_path / "r"])
+
+
+def test_a_dataset_mesh_of_quads_is_refused(copy, tmp_path, capsys):
+    """Loading splits each quad into two triangles, which renumbers the faces (their identity)."""
+    ds, _, _ = copy
+    quads = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 4\nf 1 2 5\n"
+    (ds / "quads.obj").write_text(quads)
+    record = json.loads((ds / "transforms.json").read_text())
+    record["mesh_file_path"] = "quads.obj"
+    (ds / "transforms.json").write_text(json.dumps(record))
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "declares 2 faces, which load as 3 triangles",
+                 "triangulate it first", inputs=[ds], absent=[tmp_path / "r"])
+
+
+@pytest.mark.parametrize("value, needle", [(-0.2, "is [-0.2"), (1e308, "is [1e+308")])
+def test_imported_albedos_that_are_no_reflectance_are_refused(copy, tmp_path, capsys, value, needle):
+    ds, run, _ = copy
+    arrays = dict(np.load(run / "estimate.npz"))
+    arrays["diffuse"][3] = value
+    np.savez(tmp_path / "faces.npz", diffuse=arrays["diffuse"], specular=arrays["specular"])
+    expect_error(capsys, ["import", ds, "--from", "per-face", "--file", tmp_path / "faces.npz", "-o", tmp_path / "x"],
+                 "diffuse albedo of face 3", needle, "an albedo is a reflectance", inputs=[ds],
+                 absent=[tmp_path / "x"])
+
+
+def test_an_image_above_the_pixel_limit_is_refused_before_decoding(copy, tmp_path, capsys, monkeypatch):
+    from harness.io import images
+
+    ds, _, _ = copy
+    monkeypatch.setattr(images, "MAX_IMAGE_PIXELS", 100)     # the micro frames are 24 x 24
+    png = tmp_path / "albedo.png"
+    from PIL import Image
+    Image.new("RGB", (40, 20)).save(png)
+    with pytest.raises(Exception, match=r"albedo.png is 40x20 pixels, above the limit of 100"):
+        images.read_linear_rgb(png)
+
+
+def test_a_full_disk_during_an_exr_write_names_the_output(copy, tmp_path, capsys, monkeypatch):
+    """OpenEXR's RuntimeError named the temporary folder and came out as a traceback."""
+    import OpenEXR
+
+    ds, _, _ = copy
+
+    def full(self, path):
+        raise RuntimeError(f'Failed to write pixel data to image file "{path}". No space left on device.')
+
+    monkeypatch.setattr(OpenEXR.File, "write", full)
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], f"cannot write {tmp_path / 'r'}",
+                 "illumination.exr: No space left on device", inputs=[ds], absent=[tmp_path / "r"])

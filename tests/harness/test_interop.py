@@ -223,12 +223,24 @@ def test_mitsuba_export_refuses_a_phong_dataset(tiny_earth, tmp_path, capsys):
      "<bsdf type='dielectric'/></shape></scene>", "BSDF type 'dielectric' is not read"),
     ("<sensor/>", "not a Mitsuba <scene>"),
     ("<scene", "not a readable XML file"),
+    ("<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/>"
+     "<bsdf type='blendbsdf'><float name='weight' value='abc'/><bsdf type='diffuse'/><bsdf type='diffuse'/></bsdf>"
+     "</shape></scene>", "<float name='weight'> must hold 1 finite numbers"),
+    ("<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/><bsdf type='diffuse'/>"
+     "</shape><emitter type='envmap'><string name='filename' value='env.exr'/><float name='scale' value='abc'/>"
+     "</emitter></scene>", "<float name='scale'> must hold 1 finite numbers"),
+    ("<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/><bsdf type='diffuse'/>"
+     "</shape><emitter type='envmap'><string name='filename' value='env.exr'/><float name='scale' value='1e308'/>"
+     "</emitter></scene>", "scale'> of the envmap must lie in [0, 1e+12]"),
 ])
 def test_mitsuba_xml_import_errors(stock_export, tmp_path, capsys, text, needle):
     import shutil
 
+    from harness.io.exr import write_exr
+
     folder, out = stock_export
     shutil.copy(out / "object.ply", tmp_path / "object.ply")
+    write_exr(tmp_path / "env.exr", np.ones((8, 16, 3), np.float32))
     (tmp_path / "scene.xml").write_text(text)
     assert main(["import", str(folder), "--from", "mitsuba-xml", "--file", str(tmp_path / "scene.xml"),
                  "-o", str(tmp_path / "run")]) == 2
