@@ -242,6 +242,11 @@ def cmd_suite(args) -> int:
     check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
     if args.executor == "dask" and args.scheduler and args.scheduler.startswith("tcp://"):
         probe_scheduler(args.scheduler)   # before anything is written
+    if args.executor == "local":   # a variant this machine cannot run fails here once, not in every job
+        from estimator import backend
+        if backend.resolve_variant(args.variant) == "cuda_ad_rgb" and backend.cuda_device_count() == 0:
+            raise InputError("--variant cuda_ad_rgb: this machine has no usable CUDA GPU (the driver reports none); "
+                             "use --variant llvm_ad_rgb, or --executor dask with GPU workers")
     claim_sweep_folder(args.output)
     summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
                         not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import multiprocessing
 import os
 import socket
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterator
 
@@ -21,9 +23,23 @@ def worker_threads(workers: int, cores: int | None = None) -> int:
     return max(1, (cores or os.cpu_count() or 1) // max(workers, 1))
 
 
-def _pin_gpu(devices) -> None:
-    """Pool initializer: this worker takes the next free CUDA device (before Dr.Jit starts)."""
-    os.environ["CUDA_VISIBLE_DEVICES"] = str(devices.get())
+PARENT_POLL_S = 1.0   # how often a worker checks that the sweep that started it is alive
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Worker thread: end this worker when its parent is gone (killed with SIGKILL, which no
+    handler sees: the worker is then adopted by another process and would wait forever)."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+def _init_worker(parent: int, devices) -> None:
+    """Pool initializer: watch the parent; with ``devices`` (a queue), take the next free
+    CUDA device (before Dr.Jit starts)."""
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
+    if devices is not None:
+        os.environ["CUDA_VISIBLE_DEVICES"] = str(devices.get())
 
 
 def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "local", workers: int = 1,
@@ -54,30 +70,32 @@ def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "loca
                 yield job, exc
         return
     context = multiprocessing.get_context("spawn")
-    initializer, initargs = None, ()
+    devices = None
     if gpus > 0:
         workers = min(workers, gpus)
         devices = context.Queue()
         for device in range(workers):
             devices.put(device)
-        initializer, initargs = _pin_gpu, (devices,)
     # spawned workers inherit the environment (they start on the first submit): one BLAS/OpenMP
     # pool each, of their share of the cores
     share = str(worker_threads(workers))
     saved = {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}
     os.environ.update({k: share for k in BLAS_THREAD_VARIABLES})
     try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=initializer,
-                                 initargs=initargs) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
+                                   initargs=(os.getpid(), devices))
+        try:
             futures = {pool.submit(fn, job): job for job in jobs}
-            try:
-                for future in as_completed(futures):
-                    exc = future.exception()
-                    yield futures[future], (exc if exc is not None else future.result())
-            except KeyboardInterrupt:
-                for future in futures:
-                    future.cancel()
-                raise
+            for future in as_completed(futures):
+                exc = future.exception()
+                yield futures[future], (exc if exc is not None else future.result())
+        except BaseException:   # Ctrl-C, SIGTERM (the CLI's Terminated), a failing consumer: stop now
+            workers_alive = list(getattr(pool, "_processes", {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for process in workers_alive:   # the running jobs too: their outputs are atomic
+                process.terminate()
+            raise
+        pool.shutdown(wait=True)
     finally:
         for k, v in saved.items():
             if v is None:

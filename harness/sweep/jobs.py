@@ -55,9 +55,28 @@ def finished(folder: str, job_id: str) -> dict | None:
     if record.get("kind") == "run" and not (isinstance(record.get("metrics"), dict)
                                             and os.path.isfile(os.path.join(folder, "report", "metrics.json"))):
         return None   # a damaged record or a deleted report: run it again
-    if record.get("kind") == "dataset" and not os.path.isfile(os.path.join(folder, "transforms.json")):
-        return None
+    if record.get("kind") == "dataset" and (not os.path.isfile(os.path.join(folder, "transforms.json"))
+                                            or record.get("files") != file_digests(folder)):
+        return None   # a file changed, truncated or deleted since it was made: make it again
     return record
+
+
+def file_digests(folder: str) -> dict[str, str]:
+    """{relative path: BLAKE2b-128 hex} of every file under ``folder`` but the job record:
+    a cached dataset is reused only while these match what was written."""
+    out = {}
+    for root, _, names in os.walk(folder):
+        for name in names:
+            path = os.path.join(root, name)
+            rel = os.path.relpath(path, folder)
+            if rel == JOB_FILE or name.startswith(f".{JOB_FILE}"):
+                continue
+            digest = hashlib.blake2b(digest_size=16)
+            with open(path, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    digest.update(block)
+            out[rel] = digest.hexdigest()
+    return dict(sorted(out.items()))
 
 
 def _record(folder: str, record: dict) -> dict:
@@ -99,7 +118,8 @@ def dataset_job(job: dict) -> dict:
     summary = generate(load_spec(job["spec_path"], job["profile"], job["overrides"]), job["folder"], overwrite=True,
                        variant=job.get("variant"))
     return _record(job["folder"], {"id": job["id"], "kind": "dataset", "seconds": time.perf_counter() - t,
-                                   "faces": summary["faces"], "views": summary["views"], "reused": False})
+                                   "faces": summary["faces"], "views": summary["views"],
+                                   "files": file_digests(job["folder"]), "reused": False})
 
 
 def run_job(job: dict) -> dict:

@@ -5,6 +5,7 @@ import os
 
 import pytest
 
+from estimator import backend
 from estimator.core.errors import InputError
 from harness.cli.main import main
 from harness.scene.spec import SpecError
@@ -117,6 +118,11 @@ def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     os.remove(run_json.parent.parent / jobs.JOB_FILE)
     assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
     assert "1 jobs run, 5 reused" in capsys.readouterr().out
+    # a damaged cached dataset (a truncated image) is made again, not reused for ever
+    image = next((out / "datasets").glob("*/images/train_001.exr"))
+    image.write_bytes(image.read_bytes()[:100])
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
+    assert "1 jobs run, 5 reused" in capsys.readouterr().out and image.stat().st_size > 100
     # a regression verdict against a previous sweep: the same code passes; a baseline that
     # claims a better result than now (beyond the tolerance) fails, named per row and metric
     baseline = tmp_path / "baseline.json"
@@ -236,3 +242,68 @@ def test_version_and_each_commands_own_usage_line(capsys):
     for name in ("bench", "suite"):
         assert main([name, "--help"]) == 0
         assert capsys.readouterr().out.startswith(f"usage: pseudolight {name} ")
+
+
+def _park(job):
+    """A job that records its worker's pid, then waits far longer than any test."""
+    import os
+    import time
+
+    with open(os.path.join(job["folder"], f"{os.getpid()}.pid"), "w"):
+        pass
+    time.sleep(600)
+    return {}
+
+
+POOL_PARENT = """
+import signal, sys
+from harness.sweep.executor import run_jobs
+signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # as the CLI: unwind (a BaseException)
+from tests.harness.test_sweep import _park
+list(run_jobs(_park, [{"folder": sys.argv[1], "x": i} for i in range(4)], "local", 2))
+"""
+
+
+def _alive(pid: int) -> bool:
+    import os
+
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as f:                  # a zombie has ended too
+        return f.read().split(") ", 1)[1][0] != "Z"
+
+
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
+def test_pool_workers_end_with_their_sweep(tmp_path, how):
+    """A killed sweep left its workers waiting forever (SIGKILL), or waited for every queued
+    job before exiting (SIGTERM: here for ever). Liveness is polled with a generous bound,
+    not timed."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    parent = subprocess.Popen([sys.executable, "-c", POOL_PARENT, str(tmp_path)], cwd=root,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while len(list(tmp_path.glob("*.pid"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    workers = [int(p.stem) for p in tmp_path.glob("*.pid")]
+    assert len(workers) == 2
+    parent.send_signal(getattr(signal, how))
+    parent.wait(timeout=120)
+    while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in workers)
+
+
+@pytest.mark.skipif(backend.cuda_device_count() > 0, reason="this machine has a CUDA GPU")
+def test_a_cuda_sweep_without_a_gpu_fails_once_before_writing(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--variant", "cuda_ad_rgb"]) == 2
+    err = capsys.readouterr().err
+    assert "no usable CUDA GPU" in err and "FAILED" not in err and not out.exists()
