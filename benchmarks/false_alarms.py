@@ -6,9 +6,9 @@ estimate raises is counted by kind (its text up to the first ':'). A warning on 
 scenes is a false alarm, except 'face(s) left unestimated' (a statement, not an alarm:
 counted apart). With ``--holdout K`` each run is also cross-validated on K held-out
 views (as ``estimate --holdout-views K``), its warnings counted too, and the largest
-departure of a held-out view's exposure gain from 1 recorded: what clean scenes show sets
-``MAX_HELD_OUT_GAIN``. With ``--faults``, the same on scenes with those capture faults
-(the detection rate).
+departure of a held-out view's exposure gain from 1 recorded (what clean scenes show
+bounds any exposure test drawn from it). With ``--faults``, the same on scenes with those
+capture faults (the detection rate).
 
     python benchmarks/false_alarms.py [--out DIR] [--profile tiny] [--seeds 0-19] [--holdout 4]
                                       [--scenes all] [--faults KEY=VALUE ...] [--name NAME]

@@ -61,7 +61,8 @@ def exposure_gain(actual: np.ndarray, predicted: np.ndarray) -> list[float | Non
     solved from: per channel, exp of the median log ratio of its pixels (N, 3) to their
     predictions (N, 3), over pixels whose prediction is not dark; None where none is.
     The estimate's light and albedos are the training views' gauge, so a camera on
-    auto-exposure shows here as a gain away from 1."""
+    auto-exposure shows here as a gain away from 1, as does a view the estimate predicts
+    poorly: a figure to read beside the view's PSNR, not a test."""
     out = []
     for c in range(3):
         level = np.percentile(predicted[:, c], 90)
@@ -100,24 +101,20 @@ def cross_validate(data: MultiViewData, k: int, solve) -> dict:
 
 MIN_CV_PSNR_DB = 10.0    # an error of a third of the exposure level on every held-out pixel
 MAX_HELD_OUT_RMSE = 1.0  # a prediction further from its image than a black image is
-MAX_HELD_OUT_GAIN = 0.25  # placeholder: calibrated on clean scenes by benchmarks/false_alarms.py
 
 
 def cross_validation_warnings(cv: dict) -> list[str]:
     """Warnings of a :func:`cross_validate` result: its mean prediction PSNR below
-    :data:`MIN_CV_PSNR_DB`, a held-out view whose exposure gain departs from 1 by more than
-    :data:`MAX_HELD_OUT_GAIN`, or one whose relative RMSE exceeds :data:`MAX_HELD_OUT_RMSE`
-    (the held-out solve diverged, or the model does not hold)."""
+    :data:`MIN_CV_PSNR_DB`, or a held-out view whose relative RMSE exceeds
+    :data:`MAX_HELD_OUT_RMSE` (the held-out solve diverged, or the model does not hold).
+
+    No warning is drawn from the held-out views' exposure gains: on clean scenes they depart
+    from 1 by 1 % to 10x wherever the estimate predicts a view poorly
+    (``benchmarks/false_alarms.py``), so they cannot tell auto-exposure apart."""
     out = []
     if cv.get("psnr") is not None and cv["psnr"] < MIN_CV_PSNR_DB:
         out.append(f"cross-validation: the held-out views are predicted at {cv['psnr']:.1f} dB, below "
                    f"{MIN_CV_PSNR_DB:g} dB: the estimate does not predict views it was not solved from")
-    gains = [(v["view"], g) for v in cv.get("views", []) for g in v.get("gain") or [] if g is not None]
-    if gains and max(abs(g - 1.0) for _, g in gains) > MAX_HELD_OUT_GAIN:
-        name, gain = max(gains, key=lambda item: abs(item[1] - 1.0))
-        out.append(f"cross-validation: held-out view {name} is recorded {gain:.2f} x as bright as predicted in a "
-                   f"channel (beyond {1 - MAX_HELD_OUT_GAIN:g}-{1 + MAX_HELD_OUT_GAIN:g}): the views' exposure or "
-                   "white balance differ (auto-exposure?); view_gain = 'fit' estimates a gain per view")
     bad = [v for v in cv.get("views", []) if v.get("relative_rmse") is not None
            and v["relative_rmse"] > MAX_HELD_OUT_RMSE]
     if bad:

@@ -1,13 +1,10 @@
 """Per-view exposure and white balance: cross-validation measures each held-out view's gain
-against the estimate solved without it, and warns when one departs from 1."""
+against the estimate solved without it."""
 import numpy as np
-import pytest
 
 from estimator import MultiViewData, View, estimate
 from estimator.diagnostics.validation import (
-    MAX_HELD_OUT_GAIN,
     cross_validate,
-    cross_validation_warnings,
     exposure_gain,
     holdout_indices,
 )
@@ -27,8 +24,6 @@ def test_a_held_out_view_exposed_otherwise_is_measured_and_named():
     scores = {v["view"]: v for v in cv["views"]}
     np.testing.assert_allclose(scores[data.views[held[0]].name]["gain"], gain, rtol=0.02)
     np.testing.assert_allclose(scores[data.views[held[1]].name]["gain"], 1.0, atol=0.02)
-    warning = [w for w in cross_validation_warnings(cv) if "exposure" in w]
-    assert len(warning) == 1 and data.views[held[0]].name in warning[0]
 
 
 def test_a_held_out_views_gain_is_its_median_ratio_to_the_prediction():
@@ -38,12 +33,3 @@ def test_a_held_out_views_gain_is_its_median_ratio_to_the_prediction():
     actual[:20] *= 5.0                                          # a highlight the model missed
     np.testing.assert_allclose(exposure_gain(actual, predicted), [1.5, 1.5, 1.2], rtol=1e-9)
     assert exposure_gain(np.zeros((3, 3)), np.zeros((3, 3))) == [None, None, None]
-
-
-@pytest.mark.parametrize("gain, warns", [(1.0 + MAX_HELD_OUT_GAIN * 1.2, True), (1.0 - MAX_HELD_OUT_GAIN * 1.2, True),
-                                         (1.0 + MAX_HELD_OUT_GAIN * 0.8, False)])
-def test_cross_validation_warns_about_a_held_out_views_exposure(gain, warns):
-    cv = {"psnr": 30.0, "views": [{"view": "a", "relative_rmse": 0.1, "gain": [1.0, 1.0, 1.0]},
-                                  {"view": "b", "relative_rmse": 0.1, "gain": [gain, 1.0, None]}]}
-    found = [w for w in cross_validation_warnings(cv) if "exposure" in w]
-    assert bool(found) == warns and (not warns or "held-out view b" in found[0])
