@@ -12,6 +12,7 @@ from .core.camera import Camera, gl_to_mitsuba, look_at, mitsuba_sensor, mitsuba
 from .core.data import MultiViewData, TriangleMesh, View
 from .core.errors import InputError
 from .core.gauge import unit_dc
+from .core.interrupt import StopRequested, clear_stop, request_stop
 from .core.psnr import PSNR_CAP_DB, psnr_db
 from .core.sh import axis_angle_matrix, fibonacci_sphere
 from .diagnostics.trust import warnings_for
@@ -28,6 +29,9 @@ from .rays.raycast import RayCaster, mitsuba_mesh
 from .rays.visibility import SphereSampling, Visibility, compute_visibility, sphere_sampling
 
 __all__ = [
+    "StopRequested",
+    "clear_stop",
+    "request_stop",
     "COMPONENTS",
     "DEFAULT_METHOD",
     "DIFFUSE_LIGHTS",

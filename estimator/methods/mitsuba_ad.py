@@ -30,6 +30,7 @@ from ..core.camera import Camera, gl_to_mitsuba, mitsuba_sensor
 from ..core.data import View
 from ..core.errors import InputError
 from ..core.gauge import unit_dc
+from ..core.interrupt import raise_if_stop_requested
 from ..core.settings import Section
 from ..model.estimate import Estimate
 from ..rays import backend
@@ -151,6 +152,7 @@ class MitsubaAD(Method):
         snapshots, snapshot_seconds = [], []
         next_snapshot, refined, step = 0.0, False, 0
         while True:
+            raise_if_stop_requested()   # a SIGTERM raised inside Dr.Jit's loop callback can be swallowed
             elapsed = time.perf_counter() - t0
             progress = max(elapsed / c.ad_time_budget, step / c.ad_max_steps if c.ad_max_steps else 0.0)
             if progress >= next_snapshot:
@@ -193,7 +195,10 @@ class MitsubaAD(Method):
         pseudo, dc = unit_dc(pseudo)
         observed = prep.all_obs.observed_faces()
         f = mesh.num_faces
-        info = {"clusters": int(f), "steps": step, "render_resolution": [first.width // factor, first.height // factor],
+        short = [] if step >= len(views) else [
+            f"mitsuba-ad ran {step} step(s) in its budget ({c.ad_time_budget:g} s), fewer than the {len(views)} views: "
+            "some views never entered the fit; raise ad_time_budget (--time-budget) or ad_max_steps"]
+        info = {"clusters": int(f), "steps": step, "method_warnings": short, "render_resolution": [first.width // factor, first.height // factor],
                 "ad_history": {"seconds": history["seconds"], "loss": history["loss"],
                                "snapshot_seconds": snapshot_seconds},
                 "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),

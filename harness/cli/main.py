@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from estimator import VARIANTS, InputError
+from estimator import VARIANTS, InputError, StopRequested, clear_stop, request_stop
 from harness.io.atomic import OutputError, check_output, refuse_inputs
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
@@ -35,6 +35,7 @@ _SIGTERM_SEEN = [False]   # set by the handler: Mitsuba's parser turns a Termina
 
 def _on_sigterm(signum, frame):
     _SIGTERM_SEEN[0] = True
+    request_stop()   # honoured at the next step of a loop whose Dr.Jit callback swallowed the exception
     raise Terminated()
 
 
@@ -43,8 +44,10 @@ def _interruption(exc: BaseException) -> type | None:
     wraps exceptions raised inside its kernels' Python callbacks in a RuntimeError)."""
     seen = set()
     while exc is not None and id(exc) not in seen:
-        if isinstance(exc, (Terminated, KeyboardInterrupt)):
-            return type(exc)
+        if isinstance(exc, (Terminated, StopRequested)):
+            return Terminated
+        if isinstance(exc, KeyboardInterrupt):
+            return KeyboardInterrupt
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
     return None
@@ -740,6 +743,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # argparse: --help (0) or a bad flag (2, one line already printed)
         return int(exc.code or 0)
     _SIGTERM_SEEN[0] = False
+    clear_stop()
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)

@@ -12,6 +12,7 @@ from estimator.methods.mitsuba_ad import downsample, resolution_factor, scaled_c
 from harness.io.dataset import read_dataset
 from harness.scene.generate import generate
 from harness.scene.spec import load_spec
+from tests.estimator.micro import micro_scene
 
 MICRO = os.path.join(os.path.dirname(os.path.dirname(__file__)), "fixtures", "micro.toml")
 
@@ -66,3 +67,19 @@ def test_mitsuba_ad_takes_at_least_one_step_whatever_its_budget(tmp_path):
     data = read_dataset(str(tmp_path / "micro"), load_test=False).data
     est = estimate(data, "mitsuba-ad", EstimatorConfig(sh_order=2, directions=100, ad_time_budget=1e-9))
     assert est.info["steps"] == 1
+    assert any(f"ran 1 step(s) in its budget (1e-09 s), fewer than the {len(data.views)} views" in w
+               for w in est.info["warnings"])
+
+
+def test_a_stop_request_ends_the_fit_at_its_next_step():
+    """A SIGTERM raised inside Dr.Jit's loop callback could be swallowed and the fit ran on:
+    the handler's stop request is checked at every step."""
+    from estimator import StopRequested, clear_stop, request_stop
+
+    data, _ = micro_scene()
+    request_stop()
+    try:
+        with pytest.raises(StopRequested):
+            estimate(data, "mitsuba-ad", EstimatorConfig(sh_order=2, directions=100, ad_time_budget=3600.0))
+    finally:
+        clear_stop()
