@@ -26,7 +26,8 @@ class ImageSet:
     predictions, references : lists of (H, W, 3) linear images; masks : lists of (H, W) bool
     pixels to compare (object pixels); names : one per image. ``align``: scale the
     predictions per channel onto the references first (False for the cross-check,
-    where the absolute scale must agree).
+    where the absolute scale must agree). ``noise``: per image, the predictions' own relative
+    Monte Carlo noise (a render's), or None.
     """
 
     names: list[str]
@@ -35,6 +36,7 @@ class ImageSet:
     masks: list[np.ndarray]
     align: bool = True
     note: str = ""
+    noise: list[float] | None = None
 
     def metrics(self) -> dict:
         per_view = [metrics.image_metrics(p, r, m, self.align)
@@ -43,6 +45,10 @@ class ImageSet:
         out = {k: float(np.mean([v[k] for v in per_view])) for k in keys}
         out["views"] = len(per_view)
         out["per_view"] = [{"name": n, **v} for n, v in zip(self.names, per_view)]
+        for view, noise in zip(out["per_view"], self.noise or []):
+            # the render's noise adds in quadrature to the disagreement of the two models
+            view["render_noise"] = noise
+            view["relative_l2_noise_free"] = float(np.sqrt(max(view["relative_l2"] ** 2 - noise ** 2, 0.0)))
         if self.note:
             out["note"] = self.note
         return out
@@ -127,7 +133,9 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
     if cross_check is not None and cross_check.names:
         cc = cross_check.metrics()
         cc["tolerance"] = cross_check_tolerance
-        cc["pass"] = bool(max(v["relative_l2"] for v in cc["per_view"]) <= cross_check_tolerance)
+        key = "relative_l2_noise_free" if cross_check.noise is not None else "relative_l2"
+        cc["compared"] = key
+        cc["pass"] = bool(max(v[key] for v in cc["per_view"]) <= cross_check_tolerance)
         out["mitsuba_cross_check"] = cc
     else:
         out["mitsuba_cross_check"] = None if cross_check is None else {"note": cross_check.note}

@@ -30,12 +30,15 @@ class Renders:
 
     relit : the ground-truth scene with its light turned by ``rotation``.
     estimate : the estimate's Mitsuba scene (None when skipped; ``estimate_note`` says why).
+    estimate_twin : the same render with another seed (None: one render only); the cross-check
+        compares their mean, and their difference measures its Monte Carlo noise.
     """
 
     rotation: tuple[str, float]
     relit: list[np.ndarray]
     estimate: list[np.ndarray] | None = None
     estimate_note: str = ""
+    estimate_twin: list[np.ndarray] | None = None
 
 
 @dataclass
@@ -80,10 +83,17 @@ def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], render
     cross = None
     if renders.estimate is not None:
         pure = predictor.caster.face_id_buffers(cams, pure=True)
-        cross = ImageSet(names, [r[..., :3] for r in renders.estimate], preds,
-                         [(pu >= 0) & (r[..., 3] >= min_coverage) for pu, r in zip(pure, renders.estimate)],
-                         align=False, note="Mitsuba path tracer (2 bounces) vs the estimator's forward model, "
-                                           "on pixels covered by one face alone")
+        masks = [(pu >= 0) & (r[..., 3] >= min_coverage) for pu, r in zip(pure, renders.estimate)]
+        renders_rgb, noise = [r[..., :3] for r in renders.estimate], None
+        if renders.estimate_twin is not None:
+            twins = [t[..., :3] for t in renders.estimate_twin]
+            renders_rgb = [0.5 * (a + b) for a, b in zip(renders_rgb, twins)]
+            # the mean of two renders deviates from its expectation by |A - B| / 2 (same variance each)
+            noise = [float(0.5 * np.linalg.norm((a - b)[m]) / max(np.linalg.norm(p[m]), 1e-300))
+                     for a, b, p, m in zip([r[..., :3] for r in renders.estimate], twins, preds, masks)]
+        cross = ImageSet(names, renders_rgb, preds, masks, align=False, noise=noise,
+                         note="Mitsuba path tracer (2 bounces) vs the estimator's forward model, "
+                              "on pixels covered by one face alone")
     elif renders.estimate_note:
         cross = ImageSet([], [], [], [], note=renders.estimate_note)
 
