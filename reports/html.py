@@ -35,6 +35,9 @@ SUMMARY_ROWS = [  # (label, dotted path, format)
 ]
 
 
+NOISE_NOTE = " (the render's own Monte Carlo noise taken out)"
+
+
 def lookup(metrics: dict, path: str):
     """Value at a dotted path, or None when any part is missing."""
     node = metrics
@@ -99,7 +102,7 @@ def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regression
         parts.append(f"<p class='{cls}'>Mitsuba cross-check {'passed' if cc['pass'] else 'FAILED'}: "
                      f"largest relative L2 per view over pixels covered by one face "
                      f"{max(v[cc.get('compared', 'relative_l2')] for v in cc['per_view']):.4f}"
-                     f"{' (the render’s own noise taken out)' if cc.get('compared') == 'relative_l2_noise_free' else ''}"
+                     f"{NOISE_NOTE if cc.get('compared') == 'relative_l2_noise_free' else ''}"
                      f" (tolerance {cc['tolerance']})</p>")
     if regressions is not None:
         worse = [r for r in regressions if r["status"] != "ok"]

@@ -198,7 +198,8 @@ class MitsubaAD(Method):
         short = [] if step >= len(views) else [
             f"mitsuba-ad ran {step} step(s) in its budget ({c.ad_time_budget:g} s), fewer than the {len(views)} views: "
             "some views never entered the fit; raise ad_time_budget (--time-budget) or ad_max_steps"]
-        info = {"clusters": int(f), "steps": step, "method_warnings": short, "render_resolution": [first.width // factor, first.height // factor],
+        info = {"clusters": int(f), "steps": step, "method_warnings": short,
+                "render_resolution": [first.width // factor, first.height // factor],
                 "ad_history": {"seconds": history["seconds"], "loss": history["loss"],
                                "snapshot_seconds": snapshot_seconds},
                 "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),
