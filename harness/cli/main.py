@@ -328,9 +328,27 @@ def _positive_float(flag: str, text: str, auto: bool = False) -> float:
     return value
 
 
+def _known_light(args, ds, method: str) -> dict:
+    """The true light a method that needs it is given: the ground truth of ``--truth`` (a
+    dataset of the same scene) or of the dataset itself."""
+    from harness.io.dataset import read_ground_truth
+
+    source = os.path.abspath(args.truth or args.dataset)
+    if args.truth:
+        other = load_json(os.path.join(source, "transforms.json"), "--truth dataset", InputError)
+        if other.get("scene") and ds.meta.get("scene") and other["scene"] != ds.meta["scene"]:
+            raise InputError(f"--truth {args.truth} is a dataset of scene {other['scene']!r}, and "
+                             f"{args.dataset} of {ds.meta['scene']!r}: the known light must be this scene's")
+    truth = read_ground_truth(source, ds.data.mesh.num_faces)
+    if truth is None:
+        raise InputError(f"method {method} needs the true light, and {source} has no ground_truth/ "
+                         "(pass --truth DATASET)")
+    return truth.known_light()
+
+
 def cmd_estimate(args) -> int:
     from estimator import EXPONENT_CANDIDATES, estimate, get_method
-    from harness.io.dataset import fingerprint, read_dataset, read_ground_truth
+    from harness.io.dataset import fingerprint, read_dataset
     from harness.io.runs import estimator_settings, write_run
 
     check_output(args.output, [args.dataset, args.truth], args.overwrite)
@@ -349,14 +367,7 @@ def cmd_estimate(args) -> int:
     if "robust_loss" in flags and method == "mitsuba-ad":
         raise InputError("--robust-loss applies to the bilinear and retinex methods; mitsuba-ad fits the images "
                          "by gradient descent on an L2 loss")
-    known = {}
-    if get_method(method).needs_illumination:
-        source = os.path.abspath(args.truth or args.dataset)
-        truth = read_ground_truth(source, ds.data.mesh.num_faces)
-        if truth is None:
-            raise InputError(f"method {method} needs the true light, and {source} has no ground_truth/ "
-                             "(pass --truth DATASET)")
-        known = truth.known_light()
+    known = _known_light(args, ds, method) if get_method(method).needs_illumination else {}
     if args.holdout_views:
         from estimator import holdout_indices
         try:

@@ -48,8 +48,9 @@ def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: boo
                          f"{ds.data.mesh.num_faces}")
     if check_fingerprint:
         recorded = run.get("fingerprint")
-        if not isinstance(recorded, dict):
-            raise InputError(f"the run {run_dir} records no fingerprint of the dataset it was estimated from, so "
+        if not isinstance(recorded, dict) or any(not isinstance(recorded.get(k), str) for k in match):
+            raise InputError(f"the run {run_dir} records no (or an incomplete) fingerprint of the dataset it was "
+                             "estimated from, so "
                              f"nothing shows that {ds.path} is that dataset; pass --no-fingerprint-check to read "
                              "it against this dataset anyway")
         current = fingerprint(ds.data)

@@ -174,10 +174,14 @@ def test_a_run_without_a_fingerprint_needs_the_flag(copy, tmp_path, capsys):
     del record["fingerprint"]
     (bare / "run.json").write_text(json.dumps(record))
     out = tmp_path / "tex"
-    expect_error(capsys, ["export-texture", bare, "-o", out], "no fingerprint", "--no-fingerprint-check",
-                 inputs=[bare, ds], absent=[out])
+    expect_error(capsys, ["export-texture", bare, "-o", out], "no (or an incomplete) fingerprint",
+                 "--no-fingerprint-check", inputs=[bare, ds], absent=[out])
     assert main(["export-texture", str(bare), "-o", str(out), "--no-fingerprint-check", "--size", "64"]) == 0
     capsys.readouterr()
+    record["fingerprint"] = {"cameras": "x", "images": "y"}    # the mesh's hash alone removed
+    (bare / "run.json").write_text(json.dumps(record))
+    expect_error(capsys, ["export-texture", bare, "-o", tmp_path / "tex2"], "incomplete) fingerprint",
+                 "--no-fingerprint-check", inputs=[bare, ds], absent=[tmp_path / "tex2"])
 
 
 def test_nan_ground_truth_is_refused(copy, capsys):
@@ -722,3 +726,16 @@ def test_a_full_disk_during_an_exr_write_names_the_output(copy, tmp_path, capsys
     monkeypatch.setattr(OpenEXR.File, "write", full)
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], f"cannot write {tmp_path / 'r'}",
                  "illumination.exr: No space left on device", inputs=[ds], absent=[tmp_path / "r"])
+
+
+def test_known_light_from_another_scene_is_refused(copy, tmp_path, capsys):
+    """``--truth`` pointing at another scene's dataset silently used that scene's light."""
+    ds, _, _ = copy
+    other = tmp_path / "other"
+    shutil.copytree(ds, other)
+    record = json.loads((other / "transforms.json").read_text())
+    record["scene"] = "another-scene"
+    (other / "transforms.json").write_text(json.dumps(record))
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--method", "known-illumination", "--truth", other],
+                 "is a dataset of scene 'another-scene'", "the known light must be this scene's",
+                 inputs=[ds, other], absent=[tmp_path / "r"])
