@@ -120,6 +120,28 @@ def test_mutated_transforms_json(micro_dataset, path_choice, value, capsys):
         shutil.rmtree(work)
 
 
+LENS_VALUES = st.one_of(st.floats(-3, 3), st.sampled_from([float("nan"), float("inf"), "x", None, True, [0.1]]))
+
+
+@FUZZ
+@given(model=st.sampled_from(["PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "OPENCV_FISHEYE", "FOV", "", 3]),
+       keys=st.dictionaries(st.sampled_from(["k1", "k2", "k3", "k4", "p1", "p2"]), LENS_VALUES, max_size=4),
+       per_frame=st.booleans())
+def test_camera_models_and_distortion(micro_dataset, model, keys, per_frame, capsys):
+    """Any camera model and distortion coefficients, at the top or on one frame: success (a
+    supported lens is undistorted on reading) or one line and exit 2."""
+    work, ds = _workspace(micro_dataset)
+    try:
+        path = os.path.join(ds, "transforms.json")
+        doc = json.load(open(path))
+        target = doc["frames"][0] if per_frame else doc
+        target.update({"camera_model": model, **keys})
+        open(path, "w").write(json.dumps(doc))
+        run_and_check(["estimate", ds, "-o", os.path.join(work, "run")], [ds], capsys)
+    finally:
+        shutil.rmtree(work)
+
+
 @FUZZ
 @given(view=st.integers(0, 5), value=PIXELS, y=st.integers(0, 20), x=st.integers(0, 20), size=st.integers(1, 12),
        channel=st.integers(0, 3))
@@ -167,5 +189,77 @@ def test_mutated_npz_files(micro_dataset, target, key_choice, array, mode, capsy
                 data[key] = array
             np.savez(path, **data)
         run_and_check(["report", run, "-o", os.path.join(work, "report"), "--no-mitsuba"], [ds, run], capsys)
+    finally:
+        shutil.rmtree(work)
+
+
+SUITE_VALUES = TOML_VALUES + ['"no-such-scene"', '["bilinear-clustered", 3]', '{ "cameras.count" = [] }',
+                              '{ "cameras.count" = "x" }', '{ "nope.key" = 1 }', '[[1]]']
+
+
+@FUZZ
+@given(line=st.integers(0, 50), value=st.sampled_from(SUITE_VALUES), drop=st.booleans())
+def test_mutated_suites(line, value, drop, capsys):
+    """A suite file with one line changed or dropped, expanded by ``bench --dry-run`` (nothing runs)."""
+    smoke = os.path.join(os.path.dirname(MICRO), "..", "..", "scenes", "suites", "smoke.toml")
+    lines = open(smoke).read().splitlines()
+    assignments = [i for i, text in enumerate(lines) if " = " in text and not text.startswith("#")]
+    index = assignments[line % len(assignments)]
+    if drop:
+        del lines[index]
+    else:
+        lines[index] = f"{lines[index].split(' = ')[0]} = {value}"
+    work = tempfile.mkdtemp(prefix="fuzz-")
+    try:
+        suite = os.path.join(work, "suite.toml")
+        open(suite, "w").write("\n".join(lines) + "\n")
+        run_and_check(["bench", suite, "-o", os.path.join(work, "out"), "--dry-run"], [suite], capsys)
+        assert not os.path.exists(os.path.join(work, "out"))
+    finally:
+        shutil.rmtree(work)
+
+
+XML_VALUES = ["abc", "nan", "-1", "1e308", "0.5", "", "1 2", "0,0,0"]
+
+
+@FUZZ
+@given(kind=st.sampled_from(["per-face-csv", "xml"]), value=st.sampled_from(XML_VALUES), row=st.integers(0, 90),
+       column=st.integers(0, 5))
+def test_mutated_imports(micro_dataset, kind, value, row, column, capsys):
+    """A per-face CSV with one cell changed, or a Mitsuba XML with one value changed, imported
+    (unchanged, both import: ``0.5`` is among the values)."""
+    work, ds = _workspace(micro_dataset)
+    try:
+        est = np.load(os.path.join(micro_dataset[1], "estimate.npz"))
+        if kind == "per-face-csv":
+            table = np.concatenate([est["diffuse"], est["specular"]], axis=1).astype(object)
+            lines = ["diffuse_r,diffuse_g,diffuse_b,specular_r,specular_g,specular_b"]
+            lines += [",".join(f"{v:.6g}" for v in r) for r in table]
+            body = lines[1 + row % (len(lines) - 1)].split(",")
+            body[column] = value
+            lines[1 + row % (len(lines) - 1)] = ",".join(body)
+            source = os.path.join(work, "faces.csv")
+            open(source, "w").write("\n".join(lines) + "\n")
+            argv = ["import", ds, "--from", "per-face", "--file", source, "-o", os.path.join(work, "run")]
+        else:
+            from harness.io.exr import write_exr
+            from harness.io.mesh import load_mesh_file, write_uv_ply
+
+            mesh = load_mesh_file(os.path.join(ds, "mesh.ply"))   # the dataset's mesh, with UVs (Mitsuba's ply)
+            uv = np.tile([[0.1, 0.1], [0.9, 0.1], [0.5, 0.9]], (mesh.num_faces, 1, 1))
+            write_uv_ply(os.path.join(work, "object.ply"), mesh.vertices[mesh.faces], uv)
+            write_exr(os.path.join(work, "env.exr"), np.ones((8, 16, 3), np.float32))
+            values = ["0.5", "0.5", "1"]
+            values[column % 3] = value
+            source = os.path.join(work, "scene.xml")
+            open(source, "w").write(
+                "<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/>"
+                f"<bsdf type='blendbsdf'><float name='weight' value='{values[0]}'/>"
+                f"<bsdf type='diffuse'><rgb name='reflectance' value='{values[1]}'/></bsdf>"
+                "<bsdf type='conductor'/></bsdf></shape>"
+                f"<emitter type='envmap'><string name='filename' value='env.exr'/>"
+                f"<float name='scale' value='{values[2]}'/></emitter></scene>")
+            argv = ["import", ds, "--from", "mitsuba-xml", "--file", source, "-o", os.path.join(work, "run")]
+        run_and_check(argv, [ds, source], capsys)
     finally:
         shutil.rmtree(work)
