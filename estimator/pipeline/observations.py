@@ -82,6 +82,28 @@ class Observations:
         return group_quantile(self.face, self.rgb, self.num_faces, 0.5, interpolate=True)
 
 
+# views of one object under one light differ in exposure level by what they see (a sunlit side
+# against the sky-lit one: 10-100x), never by more than a camera's dynamic range (~14 stops);
+# a view this far from the median one carries a wrong scale (or a corrupt file)
+MAX_LEVEL_RATIO = 1e4
+
+
+def _check_exposure_levels(views: list[View], levels: np.ndarray) -> None:
+    """Refuse a view whose 99th-percentile object value lies more than MAX_LEVEL_RATIO from
+    the median view's, naming it (one such view sank a whole estimate)."""
+    lit = levels > 0
+    if lit.sum() < 3:
+        return
+    median = float(np.median(levels[lit]))
+    ratio = np.where(lit, levels / median, 1.0)
+    bad = np.nonzero((ratio > MAX_LEVEL_RATIO) | (ratio < 1.0 / MAX_LEVEL_RATIO))[0]
+    if len(bad):
+        worst = int(bad[np.argmax(np.abs(np.log(ratio[bad])))])
+        raise InputError(f"view {views[worst].name} is exposed {ratio[worst]:.3g} x the median view's level "
+                         f"({len(bad)} view(s) beyond {MAX_LEVEL_RATIO:g} x either way, more than any camera's "
+                         "dynamic range): a wrong scale or a corrupt image; fix it or drop it from the dataset")
+
+
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = ObservationConfig.min_pixels,
                         min_alpha: float = ObservationConfig.min_coverage,
                         pure_pixels: bool = ObservationConfig.pure_pixels,
@@ -100,7 +122,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     mesh: TriangleMesh = caster.mesh
     f = mesh.num_faces
     centroids = mesh.centroids
-    parts, rejected = [], []
+    parts, rejected, levels = [], [], []
     buffers = caster.face_id_buffers([v.camera for v in views], pure=pure_pixels)
     for index, (view, ids) in enumerate(zip(views, buffers)):
         ids = ids.ravel()
@@ -109,6 +131,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
             valid &= view.alpha.ravel() >= min_alpha
         rgb = view.rgb.reshape(-1, 3)
         level = float(np.percentile(rgb[valid].max(axis=1), 99)) if valid.any() else 0.0
+        levels.append(level)
         negative = valid & np.any(rgb < -negative_tolerance * max(level, 1e-30), axis=1)
         rejected.append(int(negative.sum()))
         valid &= ~negative
@@ -131,6 +154,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     if blind:
         raise InputError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
+    _check_exposure_levels(views, np.array(levels))
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
     return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
                         view_index.astype(np.int64))

@@ -586,6 +586,9 @@ def _add_estimator_flags(p) -> None:
     p.add_argument("--variant", choices=VARIANTS + ("auto",))
 
 
+MAX_CROSS_CHECK_SPP = 65536   # as render.spp: a 512^2 view at this count is 2^34 samples, hours
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (no usage block), exit code 2, like every other input error."""
 
@@ -684,8 +687,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--write-baseline", metavar="FILE", help="store this report's tracked metrics as a baseline")
     rp.add_argument("--rotate-illumination", nargs=2, metavar=("AXIS", "DEG"), default=["y", "90"],
                     help="relighting test: turn the light about x, y or z (default: y 90)")
-    rp.add_argument("--cross-check-spp", type=_positive_int,
-                    help="spp of the Mitsuba re-render (default 64; 512 for --specular-model lobe)")
+    rp.add_argument("--cross-check-spp", type=_int_at_least(1, MAX_CROSS_CHECK_SPP),
+                    help="spp of the Mitsuba re-render (default 64; 512 for --specular-model lobe; at most "
+                         f"{MAX_CROSS_CHECK_SPP}, the scene specs' bound)")
     rp.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba re-render cross-check")
     rp.add_argument("--overwrite", action="store_true")
     rp.add_argument("--no-fingerprint-check", action="store_true",

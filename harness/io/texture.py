@@ -81,7 +81,7 @@ def srgb8(linear: np.ndarray) -> np.ndarray:
     return np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
 
 
-MAX_SIZE = 8192   # two float32 RGB maps of 8192^2 and their 8-bit copies: about 2 GiB at the peak
+MAX_SIZE = 8192   # two float32 RGB maps of 8192^2, their 8-bit copies, the rasteriser's buffers: 5.4 GiB peak
 
 
 def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarray | None = None,

@@ -99,3 +99,15 @@ def test_a_mesh_beyond_float32_reach_is_refused_before_tracing():
     mesh = TriangleMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]) * 1e30, np.array([[0, 1, 2]]))
     with pytest.raises(InputError, match="rescale the mesh"):
         RayCaster(mesh)
+
+
+def test_a_view_scaled_beyond_any_dynamic_range_is_named():
+    """One view multiplied by 1e38 gave albedos of 6e49 with exit 0 (or sank the estimate)."""
+    from estimator import InputError
+
+    from .micro import micro_config, micro_scene
+
+    data, _ = micro_scene()
+    views = [View(v.name, v.camera, v.rgb * (1e38 if k == 3 else 1.0), v.alpha) for k, v in enumerate(data.views)]
+    with pytest.raises(InputError, match=r"view view3 is exposed 1\.\d+e\+38 x the median view.s level"):
+        estimate(MultiViewData(data.mesh, views), "bilinear-clustered", micro_config())
