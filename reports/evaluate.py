@@ -5,13 +5,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator import Estimate, TriangleMesh
+from estimator import Estimate, TriangleMesh, sh
 
 from . import metrics
 from .ground_truth import (
     GroundTruth,
     evaluation_mask,
     filtered_illumination,
+    sun_direction,
     true_irradiance,
 )
 
@@ -63,6 +64,22 @@ class Evaluation:
     filtered_truth_sh: np.ndarray | None = None
 
 
+def illumination_metrics(est: Estimate, truth: GroundTruth, truth_sh: np.ndarray) -> dict:
+    """Errors of the light beyond the SH L2: the irradiance it gives a matte surface, its
+    lat-long map's PSNR (both after one scale per channel) and, where the truth has a sun,
+    the angle to the estimated light's brightest direction."""
+    order = min(metrics.IRRADIANCE_ORDER, est.sh_order)
+    if est.radiance_sh is not None:
+        radiance = est.radiance_sh
+    else:   # the pseudo light is the radiance filtered by the Phong lobe: undo it on degrees 0-2
+        lobe = sh.expand_per_degree(sh.phong_filter(order, est.config.phong_exponent))[:, None]
+        radiance = est.pseudo_sh[: sh.num_coeffs(order)] / lobe
+    sun = sun_direction(truth)
+    return {"irradiance_relative_l2": metrics.irradiance_error(radiance, truth.radiance_sh),
+            "latlong_psnr": metrics.latlong_psnr(est.pseudo_sh, truth_sh),
+            "sun_direction_error_deg": None if sun is None else metrics.direction_error_deg(est.pseudo_sh, sun)}
+
+
 def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: ImageSet | None = None,
              relit: ImageSet | None = None, cross_check: ImageSet | None = None,
              cross_check_tolerance: float = 0.01, shadow: tuple | None = None) -> Evaluation:
@@ -81,7 +98,8 @@ def evaluate(mesh: TriangleMesh, truth: GroundTruth, est: Estimate, novel: Image
     truth_sh = filtered_illumination(truth, est.sh_order)
     dc = truth.radiance_sh[0]  # DC of the true radiance per channel (the Phong filter is 1 at l = 0)
     out: dict = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION}
-    out["illumination"] = metrics.sh_comparison(est.pseudo_sh, truth_sh)
+    out["illumination"] = {**metrics.sh_comparison(est.pseudo_sh, truth_sh),
+                           **illumination_metrics(est, truth, truth_sh)}
     out["faces"] = {"total": int(mesh.num_faces), "estimated": int(est.observed.sum())}
     ratios, albedo = {}, {}
     irradiance = None

@@ -59,6 +59,27 @@ def filtered_illumination(truth: GroundTruth, order: int) -> np.ndarray:
     return sh.pseudo_illumination(truth.radiance_sh, truth.brdf["exponent"], order)
 
 
+SUN_SHARE = 0.5   # a directional light is "the sun" when it holds at least this share of the light
+
+
+def sun_direction(truth: GroundTruth) -> np.ndarray | None:
+    """(3,) unit direction towards the true light's sun: the sun of a ``sunsky`` light, or the
+    directional light holding at least :data:`SUN_SHARE` of the total luminance; None else."""
+    light = truth.illumination or {}
+    if light.get("kind") == "sunsky" and isinstance(light.get("sunsky"), dict):
+        rotation = np.asarray(light.get("rotation", np.eye(3)), float)
+        direction = rotation @ np.asarray(light["sunsky"]["to_sun"], float)
+    elif light.get("kind") == "directional" and light.get("lights"):
+        to_light = np.array([x["to_light"] for x in light["lights"]], float)
+        power = np.array([x["irradiance"] for x in light["lights"]], float) @ [0.2126, 0.7152, 0.0722]
+        if power.max() < SUN_SHARE * power.sum():
+            return None
+        direction = to_light[int(np.argmax(power))]
+    else:
+        return None
+    return direction / np.linalg.norm(direction)
+
+
 def true_irradiance(mesh: TriangleMesh, truth: GroundTruth, sampling: SphereSampling | None = None,
                     visibility: Visibility | None = None, order: int | None = None) -> np.ndarray:
     """(F, 3) direct irradiance / pi reaching each face centroid from the true light

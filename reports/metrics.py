@@ -207,3 +207,64 @@ def ciede2000(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
         return colour.XYZ_to_Lab(colour.RGB_to_XYZ(np.clip(rgb, 0, None), space, apply_cctf_decoding=False), white)
 
     return np.asarray(colour.delta_E(lab(estimate), lab(truth), method="CIE 2000"), dtype=np.float64)
+
+
+IRRADIANCE_ORDER = 2          # the clamped cosine keeps > 99 % of irradiance energy in degrees 0-2
+IRRADIANCE_NORMALS = 2562     # normals of the irradiance comparison (a Fibonacci sphere)
+LATLONG_SIZE = (33, 64)       # rows, columns of the lat-long maps compared
+DIRECTION_SAMPLES = 20000     # directions searched for a light's brightest point (~1.6 degree spacing)
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])   # Rec. 709
+
+
+def _scaled(estimate: np.ndarray, truth: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """``estimate`` (N, 3) times the per-channel least-squares scale onto ``truth`` (the gauge)."""
+    w = np.ones(len(truth)) if weights is None else weights
+    scale = np.sum(w[:, None] * estimate * truth, axis=0) / np.maximum(np.sum(w[:, None] * estimate ** 2, axis=0),
+                                                                        1e-300)
+    return estimate * scale
+
+
+def irradiance_error(estimate_radiance: np.ndarray, true_radiance: np.ndarray) -> float:
+    """Relative L2, over a sphere of normals, of the irradiance the estimated light gives
+    against the true light's (both radiance SH (M, 3)), after one scale per channel.
+
+    Irradiance is the radiance filtered by the clamped cosine, whose SH filter is pi times
+    the Phong filter of exponent 1 (Ramamoorthi & Hanrahan), taken to degree
+    :data:`IRRADIANCE_ORDER`: what a matte surface sees of the light, whatever its detail.
+    """
+    order = IRRADIANCE_ORDER
+    kernel = np.pi * sh.expand_per_degree(sh.phong_filter(order, 1.0))[:, None]
+    basis = sh.basis(order, sh.fibonacci_sphere(IRRADIANCE_NORMALS))
+    m = sh.num_coeffs(order)
+    padded = np.zeros((m, 3))   # an estimate of a lower order has zeros above it
+    padded[: min(m, len(estimate_radiance))] = estimate_radiance[:m]
+    e, t = basis @ (kernel * padded), basis @ (kernel * true_radiance[:m])
+    return float(np.linalg.norm(_scaled(e, t) - t) / max(np.linalg.norm(t), 1e-300))
+
+
+def latlong_psnr(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """PSNR (dB, peak: the true map's maximum) of the estimated light's lat-long map against
+    the true one's (SH (M, 3) each, same filter), after one scale per channel, each pixel
+    weighted by its solid angle."""
+    from estimator.core import latlong
+
+    h, w = LATLONG_SIZE
+    weights = latlong.solid_angles(h, w).reshape(-1)
+    e = sh.to_latlong(estimate, h, w).reshape(-1, 3)
+    t = sh.to_latlong(truth, h, w).reshape(-1, 3)
+    mse = float(np.sum(weights[:, None] * (_scaled(e, t, weights) - t) ** 2) / (3 * weights.sum()))
+    return psnr_db(mse, float(t.max()))
+
+
+def brightest_direction(coeffs: np.ndarray) -> np.ndarray:
+    """(3,) unit direction where the SH light (M, 3) is brightest in luminance."""
+    dirs = sh.fibonacci_sphere(DIRECTION_SAMPLES)
+    values = sh.basis(sh.order_of(coeffs.shape[0]), dirs) @ coeffs @ LUMINANCE
+    return dirs[int(np.argmax(values))]
+
+
+def direction_error_deg(estimate: np.ndarray, to_sun: np.ndarray) -> float:
+    """Angle (degrees) between the estimated light's brightest direction and the true sun's."""
+    d = brightest_direction(estimate)
+    s = np.asarray(to_sun, float) / np.linalg.norm(to_sun)
+    return float(np.degrees(np.arccos(np.clip(d @ s, -1.0, 1.0))))

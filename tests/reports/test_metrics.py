@@ -128,3 +128,26 @@ def test_the_robust_gauge_sets_aside_no_exact_face_of_a_saturated_colour():
     scale, aside = metrics.robust_scale(2.0 * truth, truth)
     assert not aside.any()
     np.testing.assert_allclose(scale, 0.5)
+
+
+def test_illumination_metrics_beyond_the_sh_l2():
+    """Irradiance error is scale-free and zero for the truth, grows with a wrong light; the
+    lat-long PSNR is capped for the truth up to scale; a sun's direction is found to the
+    search grid's spacing (~1.6 degrees), and a light turned about +Y is off by the turn's angle."""
+    from estimator import PSNR_CAP_DB, axis_angle_matrix, sh
+    from reports import metrics
+
+    sun = np.array([0.3, 0.8, 0.5]) / np.linalg.norm([0.3, 0.8, 0.5])
+    light = sh.project_directional(8, sun[None], np.array([[1.0, 0.9, 0.8]]))
+    light[0] += 0.3
+    assert metrics.irradiance_error(2.5 * light, light) < 1e-12
+    wrong = light.copy()
+    wrong[1:4] = 0.0                                             # the light's direction lost
+    assert metrics.irradiance_error(wrong, light) > 0.3
+    assert metrics.latlong_psnr(3.0 * light, light) == PSNR_CAP_DB
+    assert metrics.latlong_psnr(wrong, light) < 40.0   # the delta peak dominates the PSNR's scale
+    assert metrics.direction_error_deg(light, sun) < 2.0
+    rotation = axis_angle_matrix("y", 30.0)
+    turned = sh.rotation_matrix(8, rotation) @ light
+    expected = np.degrees(np.arccos(np.clip(sun @ rotation @ sun, -1, 1)))
+    assert abs(metrics.direction_error_deg(turned, sun) - expected) < 2.0 and expected > 10.0
