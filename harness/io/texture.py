@@ -84,12 +84,28 @@ def srgb8(linear: np.ndarray) -> np.ndarray:
 MAX_SIZE = 8192   # two float32 RGB maps of 8192^2, their 8-bit copies, the rasteriser's buffers: 5.4 GiB peak
 
 
+def material_mtl(png_scale: dict, exponent: float) -> str:
+    """The OBJ material of an exported estimate: ``map_Kd diffuse.png`` and ``map_Ks
+    specular.png`` with ``Kd``/``Ks`` undoing each PNG's scale (viewers multiply the map by
+    the factor, so map x factor is the albedo), ``Ns`` the Phong exponent of the estimate's
+    specular lobe (the paper's mirror model is the limit of a large one)."""
+    kd, ks = (1.0 / png_scale[name] for name in ("diffuse", "specular"))
+    return ("# pseudolight estimate: Kd x map_Kd = diffuse albedo, Ks x map_Ks = specular albedo (linear; the PNGs\n"
+            "# are sRGB-encoded, diffuse.exr and specular.exr hold the linear values)\n"
+            "newmtl estimate\nKa 0 0 0\n"
+            f"Kd {kd:.6g} {kd:.6g} {kd:.6g}\nKs {ks:.6g} {ks:.6g} {ks:.6g}\nNs {min(float(exponent), 1000.0):.6g}\n"
+            "map_Kd diffuse.png\nmap_Ks specular.png\n")
+
+
 def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarray | None = None,
                     size: int = 1024) -> dict:
     """Write the estimate's texture maps, meshes and light into ``folder`` (which must exist).
 
-    Files: ``diffuse.{png,exr}``, ``specular.{png,exr}``, ``mesh.obj`` + ``material.mtl``,
-    ``mesh.glb``, ``radiance.exr`` and ``texture.json`` (scales and counts). The PNGs are
+    Files: ``diffuse.{png,exr}``, ``specular.{png,exr}``, ``mesh.obj`` + ``material.mtl``
+    (:func:`material_mtl`: both maps), ``mesh.glb`` (the diffuse map as base colour, metallic
+    0, roughness 1: glTF's metallic-roughness model has no Phong specular albedo, which
+    stays in ``specular.*`` and the MTL), ``radiance.exr`` and ``texture.json`` (scales and
+    counts; ``radiance.from`` names the light in ``radiance.exr``). The PNGs are
     8-bit sRGB of the albedo times ``png_scale`` (so the brightest 0.5 % saturate at most:
     the estimate's albedo is in the light's unit-DC gauge, not bounded by 1); the EXRs are
     the linear albedo itself. Unestimated faces are black. The mesh's own UVs are used when
@@ -129,12 +145,13 @@ def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarr
     textured = trimesh.Trimesh(vertices, faces, process=False,
                                visual=trimesh.visual.TextureVisuals(uv=uvs, material=material))
     textured.export(os.path.join(folder, "mesh.glb"))
-    # Kd 1 and Ks 0: viewers multiply map_Kd by Kd (trimesh's default Kd 0.4 would darken it)
-    simple = trimesh.visual.material.SimpleMaterial(name="estimate", image=images["diffuse"],
-                                                    diffuse=[255, 255, 255, 255], specular=[0, 0, 0, 255])
+    simple = trimesh.visual.material.SimpleMaterial(name="estimate", image=images["diffuse"])
     obj_mesh = trimesh.Trimesh(vertices, faces, process=False,
                                visual=trimesh.visual.TextureVisuals(uv=uvs, material=simple))
-    obj_mesh.export(os.path.join(folder, "mesh.obj"), mtl_name="material.mtl")
+    obj_mesh.export(os.path.join(folder, "mesh.obj"), mtl_name="material.mtl")   # vt, mtllib and usemtl lines
+    os.remove(os.path.join(folder, "estimate.png"))   # trimesh's copy of diffuse.png; the MTL names both maps
+    with open(os.path.join(folder, "material.mtl"), "w") as f:
+        f.write(material_mtl(summary["png_scale"], est.config.phong_exponent))
     with open(os.path.join(folder, "texture.json"), "w") as f:
         json.dump(summary, f, indent=1)
     return summary

@@ -51,7 +51,14 @@ def test_export_texture_command(micro, tmp_path):  # noqa: F811
     assert np.abs(sample(png, centroids)[observed] - expected[observed]).max() <= 1.0
     obj = trimesh.load(out / "mesh.obj", force="mesh", process=False)
     assert len(obj.faces) == 80
-    assert os.path.isfile(out / "radiance.exr") and os.path.isfile(out / "material.mtl")
+    assert os.path.isfile(out / "radiance.exr") and not os.path.exists(out / "estimate.png")
+    # the OBJ's material names both maps, with factors that undo each PNG's scale
+    mtl = dict(line.split(" ", 1) for line in (out / "material.mtl").read_text().splitlines()
+               if line and not line.startswith("#"))
+    assert mtl["map_Kd"] == "diffuse.png" and mtl["map_Ks"] == "specular.png"
+    for key, name in (("Kd", "diffuse"), ("Ks", "specular")):
+        np.testing.assert_allclose([float(v) for v in mtl[key].split()], 1.0 / meta["png_scale"][name], rtol=1e-5)
+    assert float(mtl["Ns"]) == min(est.config.phong_exponent, 1000.0)
 
 
 def test_uvs_outside_the_unit_square_are_unwrapped_not_clamped(tmp_path):
