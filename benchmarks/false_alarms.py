@@ -106,7 +106,7 @@ def main() -> None:
     print(f"{len(done)} scenes estimated ({len(rows) - len(done)} refused); any alarm: {alarms} "
           f"({100 * alarms / max(len(done), 1):.0f} %)")
     for name, n in counts.most_common():
-        statement = any(name in s or s.startswith(name) for s in STATEMENTS)
+        statement = any(name.startswith(s) or s.startswith(name) for s in STATEMENTS)
         print(f"  {n:3d} ({100 * n / len(done):3.0f} %)  {name}{'  [statement]' if statement else ''}")
 
 
