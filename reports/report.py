@@ -131,7 +131,8 @@ COMPARE_COLUMNS = [
     ("spec ±10 % (lstsq)", "albedo.specular.lstsq.luminance.within_10"),
     ("diff ±10 % (DC)", "albedo.diffuse.dc.luminance.within_10"),
     ("diff ±10 % (lstsq)", "albedo.diffuse.lstsq.luminance.within_10"),
-    ("diff median |err| (lstsq)", "diffuse_median_abs_error"),
+    ("diff ±10 % (robust)", "albedo.diffuse.robust.luminance.within_10"),
+    ("diff median |err| (median gauge)", "diffuse_median_abs_error"),
     ("ARI", "clusters.ari"), ("clusters", "clusters.clusters"),
     ("novel PSNR sRGB", "novel_views.psnr_srgb"), ("relit PSNR sRGB", "relighting.psnr_srgb"),
 ]

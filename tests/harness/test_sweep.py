@@ -128,7 +128,7 @@ def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     baseline = tmp_path / "baseline.json"
     baseline.write_text((out / "compare" / "sweep.json").read_text())
     assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--baseline", str(baseline)]) == 0
-    assert "baseline sweep: 16 of 16 tracked metrics within tolerance" in capsys.readouterr().out   # 4 rows x 4
+    assert "baseline sweep: 28 of 28 tracked metrics within tolerance" in capsys.readouterr().out   # 4 rows x 7
     verdict = json.load(open(out / "compare" / "regression.json"))
     assert verdict["worse"] == 0 and verdict["compared"] >= 4
     better = json.loads(baseline.read_text())
