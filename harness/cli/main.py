@@ -499,6 +499,7 @@ def cmd_export(args) -> int:
 def cmd_import(args) -> int:
     from harness.io.dataset import fingerprint, read_dataset
     from harness.io.imports import (
+        import_warnings,
         imported_estimate,
         read_mitsuba_xml,
         read_per_face,
@@ -527,6 +528,8 @@ def cmd_import(args) -> int:
         arrays = read_uv_textures(ds.data.mesh, args.mesh, args.diffuse, args.specular, args.envmap)
     est = imported_estimate(arrays, f, f"{args.source}: {', '.join(os.path.abspath(p) for p in files)}",
                             _positive_float("--exponent", args.exponent))
+    for warning in import_warnings(arrays):
+        _err(f"warning: {warning}")
     write_run(args.output, est, args.dataset, overwrite=args.overwrite, extra={"scene": ds.meta.get("scene")},
               fingerprint=fingerprint(ds.data), inputs=[*ds.inputs, *files])
     print(f"imported {args.source} for {f} faces as {est.method}; written to {os.path.abspath(args.output)} "

@@ -343,6 +343,29 @@ def _xml_matrix(element, path: str) -> np.ndarray | None:
     return _xml_floats(children[0], path, 16).reshape(4, 4)
 
 
+def import_warnings(arrays: dict) -> list[str]:
+    """What an import may have read wrong, one line each: an albedo black or of one colour on
+    every face (an empty or unread texture), and no light at all (the estimate then holds a
+    constant one, which the reports compare as if it were the method's)."""
+    out = []
+    for name in ("diffuse", "specular"):
+        values = arrays.get(name)
+        if values is None:
+            continue
+        known = values[np.isfinite(values).all(axis=1)]
+        if not len(known):
+            continue
+        if np.all(np.abs(known) <= 1e-6):
+            out.append(f"the imported {name} albedo is black on every face: an empty or unread texture?")
+        elif np.all(np.ptp(known, axis=0) <= 1e-6 * np.abs(known).max()):
+            out.append(f"the imported {name} albedo is one colour on every face ({known[0].round(4).tolist()}): "
+                       "a texture that did not map onto the mesh?")
+    if arrays.get("radiance_sh") is None and arrays.get("pseudo_sh") is None:
+        out.append("no light imported: the estimate holds a constant light, and the report's illumination "
+                   "figures score that constant, not the method's light")
+    return out
+
+
 # an imported albedo may carry any global scale (the reports fit one), but one above this is no
 # reflectance in any unit: its squared errors overflow the reports' sums
 MAX_IMPORTED_ALBEDO = 1e6

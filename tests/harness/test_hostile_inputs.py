@@ -739,3 +739,15 @@ def test_known_light_from_another_scene_is_refused(copy, tmp_path, capsys):
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--method", "known-illumination", "--truth", other],
                  "is a dataset of scene 'another-scene'", "the known light must be this scene's",
                  inputs=[ds, other], absent=[tmp_path / "r"])
+
+
+def test_import_warns_about_a_black_or_one_colour_albedo_and_no_light(copy, tmp_path, capsys):
+    ds, run, _ = copy
+    f = len(np.load(run / "estimate.npz")["diffuse"])
+    for values, needle in ((np.zeros((f, 3)), "black on every face"),
+                           (np.tile([0.2, 0.3, 0.4], (f, 1)), "one colour on every face")):
+        np.savez(tmp_path / "faces.npz", diffuse=values)
+        assert main(["import", str(ds), "--from", "per-face", "--file", str(tmp_path / "faces.npz"), "-o",
+                     str(tmp_path / "x"), "--overwrite"]) == 0
+        err = capsys.readouterr().err
+        assert f"diffuse albedo is {needle}" in err and "no light imported" in err
