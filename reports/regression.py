@@ -30,12 +30,14 @@ TRACKED: dict[str, tuple[str, float]] = {
 
 
 def make_baseline(metrics: dict) -> dict:
-    """A baseline from a metrics dict: the tracked values it has, with their tolerances."""
+    """A baseline from a metrics dict: the tracked values it has, with their tolerances, and
+    the size of the dataset it was made on (a report on a dataset of another size is not
+    compared with it)."""
     values = {path: lookup(metrics, path) for path in TRACKED}
     values = {k: float(v) for k, v in values.items()
               if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)}
     return {"scene": metrics.get("scene"), "method": metrics.get("method"),
-            "parameters": metrics.get("parameters"), "metrics": values,
+            "parameters": metrics.get("parameters"), "dataset_size": metrics.get("dataset_size"), "metrics": values,
             "tolerances": {k: {"better": TRACKED[k][0], "tolerance": TRACKED[k][1]} for k in values}}
 
 

@@ -61,6 +61,10 @@ def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: boo
     return est, run, ds, inputs
 
 
+def _size(size: dict) -> str:
+    return f"{size.get('faces')} faces, {size.get('views')} views of {size.get('width')}x{size.get('height')}"
+
+
 def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rotation=("y", 90.0),
                  cross_check_spp: int | None = None, mitsuba: bool = True, baseline: dict | None = None,
                  overwrite: bool = False, log=print, check_fingerprint: bool = True) -> tuple[dict, list[dict] | None]:
@@ -77,7 +81,10 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     mesh = ds.data.mesh
     predictor = Predictor(mesh, est)
     check_metrics, check_figures = self_check(predictor, ds.data.views, run, est)
+    first = ds.data.views[0].camera
     header = {"scene": ds.meta.get("scene", os.path.basename(ds.path)), "dataset": ds.path,
+              "dataset_size": {"faces": int(mesh.num_faces), "views": len(ds.data.views), "width": int(first.width),
+                               "height": int(first.height)},
               "run": os.path.abspath(run_dir), "versions": versions(), "estimate_timings": run.get("timings")}
     if ds.ground_truth is None:
         log(f"{ds.path} has no ground_truth/: writing the self-check report only")
@@ -104,7 +111,15 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     content = assemble(predictor, ds.ground_truth, views, renders, header, view_note)
     m = content.metrics
     m["self_check"] = check_metrics
-    regressions = check(m, baseline) if baseline is not None else None
+    regressions = None
+    if baseline is not None:
+        made_at = baseline.get("dataset_size")
+        if made_at is not None and made_at != m["dataset_size"]:
+            log(f"baseline made on a dataset of {_size(made_at)}; this one is {_size(m['dataset_size'])}: not "
+                "compared (a baseline holds at the size it was made; --write-baseline makes one at this size)")
+            m["baseline"] = {"compared": False, "made_at": made_at}
+        else:
+            regressions = check(m, baseline)
     m["report_seconds"] = time.perf_counter() - t0
     _write_report(out_dir, overwrite, inputs, m, content.ratios, content.figures + check_figures, regressions,
                   lambda folder: export_scene(folder, mesh, est, cams[0]))
