@@ -7,6 +7,7 @@ file, key or flag and exit code 2; an interrupt (Ctrl-C, SIGTERM) with 130 or
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -328,6 +329,33 @@ def _positive_float(flag: str, text: str, auto: bool = False) -> float:
     return value
 
 
+def _estimator_sets(items: list[str]) -> dict:
+    """``estimate --set KEY=VALUE``: any estimator setting (``KEY`` a field of
+    :class:`estimator.EstimatorConfig`, optionally prefixed ``estimator.``), the value read as
+    JSON (numbers, true/false, null) or else as text. Unknown keys are named with the nearest."""
+    import difflib
+    import json as jsonlib
+
+    from estimator import EstimatorConfig
+
+    known = [f.name for f in dataclasses.fields(EstimatorConfig)]
+    out = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip().removeprefix("estimator.")
+        if not sep or not key:
+            raise InputError(f"--set takes KEY=VALUE, got {item!r}")
+        if key not in known:
+            near = difflib.get_close_matches(key, known, n=3)
+            raise InputError(f"--set {key}: not an estimator setting" + (f" (did you mean {', '.join(near)}?)"
+                                                                          if near else ""))
+        try:
+            out[key] = jsonlib.loads(text)
+        except jsonlib.JSONDecodeError:
+            out[key] = text
+    return out
+
+
 def _known_light(args, ds, method: str) -> dict:
     """The true light a method that needs it is given: the ground truth of ``--truth`` (a
     dataset of the same scene) or of the dataset itself."""
@@ -361,7 +389,12 @@ def cmd_estimate(args) -> int:
         candidates = EXPONENT_CANDIDATES
     elif "phong_exponent" in flags:
         flags["phong_exponent"] = _positive_float("--phong-exponent", flags["phong_exponent"], auto=True)
-    method, config = estimator_settings(ds.meta, args.method, flags)
+    settings = _estimator_sets(args.set or [])
+    try:
+        method, config = estimator_settings(ds.meta, args.method, {**flags, **settings})
+    except InputError as exc:
+        named = [f"--set {key}" for key in settings if key in str(exc)]
+        raise InputError(f"{named[0]}: {exc}" if named else str(exc)) from None
     if "ad_time_budget" in flags and method != "mitsuba-ad":
         raise InputError(f"--time-budget applies to mitsuba-ad (the iterative peer), not to {method}")
     if "robust_loss" in flags and method == "mitsuba-ad":
@@ -665,6 +698,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--holdout-views", type=_positive_int, metavar="K",
                    help="also solve without K evenly spread views and record the prediction PSNR on them "
                         "(cross-validation, in run.json)")
+    e.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="any estimator setting (docs/estimator.md), e.g. --set retinex_ridge=0.01; the value is read "
+                        "as JSON, else as text; it wins over the flags above and the dataset's defaults")
     e.add_argument("--truth", metavar="DATASET", help="dataset whose ground_truth/ gives the known light of the "
                                                       "known-illumination oracle (default: the dataset itself)")
     _add_estimator_flags(e)

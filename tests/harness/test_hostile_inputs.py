@@ -751,3 +751,18 @@ def test_import_warns_about_a_black_or_one_colour_albedo_and_no_light(copy, tmp_
                      str(tmp_path / "x"), "--overwrite"]) == 0
         err = capsys.readouterr().err
         assert f"diffuse albedo is {needle}" in err and "no light imported" in err
+
+
+def test_estimate_set_reaches_every_estimator_setting(copy, tmp_path, capsys):
+    """Only 13 settings had flags; ``--set KEY=VALUE`` takes any, validated, the key named."""
+    ds, _, _ = copy
+    assert main(["estimate", str(ds), "-o", str(tmp_path / "r"), "--set", "estimator.sh_order=3",
+                 "--set", "min_cos_view=0.4"]) == 0
+    capsys.readouterr()
+    parameters = json.loads((tmp_path / "r" / "run.json").read_text())["parameters"]
+    assert parameters["sh_order"] == 3 and parameters["min_cos_view"] == 0.4
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--set", "sh_ordr=4"],
+                 "--set sh_ordr: not an estimator setting (did you mean sh_order?)", inputs=[ds],
+                 absent=[tmp_path / "x"])
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--set", "sh_order=many"],
+                 "--set sh_order:", "sh_order must be int", inputs=[ds], absent=[tmp_path / "x"])
