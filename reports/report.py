@@ -55,6 +55,23 @@ def view_names(views: list[View]) -> list[str]:
     return [os.path.splitext(os.path.basename(v.name))[0] for v in views]
 
 
+def novel_views(predictor: Predictor, views: list[View], note: str = "") -> tuple[ImageSet, float, list]:
+    """The estimate's images of ``views`` against their recorded images, on the object pixels
+    (alpha at least the estimator's ``min_coverage``) whose face the estimate covers.
+
+    Returns (the image set, the mean share of object pixels left unestimated, per view the
+    (H, W) bool pixels of estimated faces)."""
+    est = predictor.estimate
+    cams = [v.camera for v in views]
+    preds = [predictor.predict(c)[0] for c in cams]
+    estimated = [(ids >= 0) & est.observed[np.maximum(ids, 0)] for ids in predictor.caster.face_id_buffers(cams)]
+    obj = [(v.alpha if v.alpha is not None else np.ones(v.rgb.shape[:2])) >= est.config.min_coverage for v in views]
+    unestimated = float(np.mean([1 - (o & e).sum() / max(o.sum(), 1) for o, e in zip(obj, estimated)]))
+    images = ImageSet(view_names(views), preds, [v.rgb for v in views], [m & e for m, e in zip(obj, estimated)],
+                      note=note)
+    return images, unestimated, estimated
+
+
 def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], renders: Renders,
              header: dict, view_note: str = "") -> ReportContent:
     """Compare an estimate (through its ``predictor``) with the ground truth.
@@ -69,11 +86,8 @@ def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], render
     min_coverage = est.config.min_coverage
     cams = [v.camera for v in views]
     names = view_names(views)
-    preds = [predictor.predict(c)[0] for c in cams]
-    estimated = [(ids >= 0) & est.observed[np.maximum(ids, 0)] for ids in predictor.caster.face_id_buffers(cams)]
-    obj = [(v.alpha if v.alpha is not None else np.ones(v.rgb.shape[:2])) >= min_coverage for v in views]
-    unestimated = float(np.mean([1 - (o & e).sum() / max(o.sum(), 1) for o, e in zip(obj, estimated)]))
-    novel = ImageSet(names, preds, [v.rgb for v in views], [m & e for m, e in zip(obj, estimated)], note=view_note)
+    novel, unestimated, estimated = novel_views(predictor, views, view_note)
+    preds = novel.predictions
 
     axis, degrees = renders.rotation
     rot = axis_angle_matrix(axis, float(degrees))

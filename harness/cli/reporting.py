@@ -24,6 +24,7 @@ from reports.report import (
     assemble,
     compare_figures,
     compare_row,
+    novel_views,
     text_table,
 )
 from reports.selfcheck import self_check
@@ -87,9 +88,15 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
                                "height": int(first.height)},
               "run": os.path.abspath(run_dir), "versions": versions(), "estimate_timings": run.get("timings")}
     if ds.ground_truth is None:
-        log(f"{ds.path} has no ground_truth/: writing the self-check report only")
+        novel = None
+        if ds.data.test_views:   # a real capture's held-out frames are scored without any truth
+            images, unestimated, _ = novel_views(predictor, ds.data.test_views,
+                                                 "the dataset's test frames (no ground truth)")
+            novel = {**images.metrics(), "unestimated_pixel_share": unestimated}
+        log(f"{ds.path} has no ground_truth/: writing the self-check report"
+            + (f" and scoring its {len(ds.data.test_views)} test frame(s)" if novel else " only (no test frames)"))
         m = {**header, "method": est.method, "ground_truth": None, "self_check": check_metrics,
-             "report_seconds": time.perf_counter() - t0}
+             "novel_views": novel, "report_seconds": time.perf_counter() - t0}
         _write_report(out_dir, overwrite, inputs, m, None, check_figures, None)
         return m, None
     views = ds.data.test_views or ds.data.views[:2]

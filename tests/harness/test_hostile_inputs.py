@@ -512,13 +512,19 @@ def test_holdout_views_and_trust_are_recorded_and_read_back(tmp_path, capsys):
 def test_report_without_ground_truth_is_the_self_check(tmp_path, capsys):
     ds = tmp_path / "micro"
     assert main(["generate", MICRO, "-o", str(ds)]) == 0
-    shutil.rmtree(ds / "ground_truth")
     run = tmp_path / "run"
     assert main(["estimate", str(ds), "-o", str(run), "--method", "bilinear-clustered", "--holdout-views", "2"]) == 0
+    assert main(["report", str(run), "-o", str(tmp_path / "with-truth"), "--no-mitsuba"]) == 0
+    with_truth = json.load(open(tmp_path / "with-truth" / "metrics.json"))["novel_views"]
+    shutil.rmtree(ds / "ground_truth")
     assert main(["report", str(run), "-o", str(tmp_path / "rep"), "--no-mitsuba"]) == 0
-    assert "self-check report only" in capsys.readouterr().err
+    assert "writing the self-check report and scoring its 1 test frame(s)" in capsys.readouterr().err
     m = json.load(open(tmp_path / "rep" / "metrics.json"))
     assert m["ground_truth"] is None and m["self_check"]["cross_validation_psnr"] > 0
+    # the held-out test frame is scored as the report with ground truth scores it
+    assert m["novel_views"]["views"] == 1
+    for key in ("psnr_linear", "psnr_srgb", "relative_l2", "unestimated_pixel_share"):
+        assert m["novel_views"][key] == pytest.approx(with_truth[key], rel=1e-12)
     assert m["self_check"]["degrees_of_freedom"]["observations"] > 0
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "self-check report" in html and html.count("<img") == 3
