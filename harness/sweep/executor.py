@@ -77,10 +77,12 @@ def run_jobs(fn: Callable[[dict], dict], jobs: list[dict], executor: str = "loca
         for device in range(workers):
             devices.put(device)
     # spawned workers inherit the environment (they start on the first submit): one BLAS/OpenMP
-    # pool each, of their share of the cores
+    # pool each, of their share of the cores, and no progress bars of their own (the sweep's
+    # one bar counts the jobs; the workers' bars overwrote each other)
     share = str(worker_threads(workers))
-    saved = {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}
-    os.environ.update({k: share for k in BLAS_THREAD_VARIABLES})
+    worker_env = {**{k: share for k in BLAS_THREAD_VARIABLES}, "TQDM_DISABLE": "1"}
+    saved = {k: os.environ.get(k) for k in worker_env}
+    os.environ.update(worker_env)
     try:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
                                    initargs=(os.getpid(), devices))

@@ -76,6 +76,21 @@ def test_pool_runs_jobs_and_reports_failures_per_job():
     assert results[2] == {"y": 4} and results[3] == {"y": 9} and isinstance(results[-1], ValueError)
 
 
+def _environment(job):
+    import os
+
+    return {key: os.environ.get(key) for key in ("TQDM_DISABLE", "OMP_NUM_THREADS")}
+
+
+def test_pool_workers_draw_no_progress_bars_and_share_the_cores():
+    import os
+
+    before = os.environ.get("TQDM_DISABLE")
+    results = [r for _, r in run_jobs(_environment, [{"x": i} for i in range(2)], "local", 2)]
+    assert all(r["TQDM_DISABLE"] == "1" and r["OMP_NUM_THREADS"] == str(worker_threads(2)) for r in results)
+    assert os.environ.get("TQDM_DISABLE") == before            # the sweep's own environment is restored
+
+
 def _device(job):
     import os
     import time
