@@ -82,6 +82,24 @@ def test_patches_land_on_the_object():
     assert np.all(occluded[box[1]:box[3], box[0]:box[2], :3] == -0.5)
 
 
+def test_exposure_and_white_balance_jitter_scale_each_view_by_its_recorded_gains():
+    """Auto-exposure: one log-normal gain per view (sigma 0.3) and a per-channel one on top
+    (sigma 0.05); the record holds the gains applied, alpha is untouched."""
+    mesh = TriangleMesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]]))
+    camera = Camera(look_at([0, 0, 3], [0, 0, 0]), 64, 64, 32, 32, 64, 64)
+    train = [(camera, _flat(0.25)) for _ in range(200)]
+    _, out, _, _, record = faults.apply_faults(FaultSpec(exposure_jitter=0.3, white_balance_jitter=0.05), 0, mesh,
+                                               train, [])
+    gains = np.array(record["view_gains"])
+    assert gains.shape == (200, 3)
+    for (_, image), gain in zip(out, gains):
+        np.testing.assert_allclose(image[0, 0, :3], 0.25 * gain, rtol=1e-6)
+        assert image[0, 0, 3] == 1.0
+    logs = np.log(gains)
+    assert abs(np.std(logs.mean(axis=1)) - 0.3) < 0.05                 # the exposure, every channel alike
+    assert abs(np.std(logs - logs.mean(axis=1, keepdims=True)) - 0.05 * np.sqrt(2 / 3)) < 0.01   # white balance
+
+
 def test_spec_validates_fault_keys():
     with pytest.raises(SpecError, match="faults.noise_read"):
         load_spec(MICRO, overrides={"faults.noise_read": -0.1})
