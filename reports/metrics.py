@@ -217,11 +217,10 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])   # Rec. 709
 
 
 def _scaled(estimate: np.ndarray, truth: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """``estimate`` (N, 3) times the per-channel least-squares scale onto ``truth`` (the gauge)."""
-    w = np.ones(len(truth)) if weights is None else weights
-    scale = np.sum(w[:, None] * estimate * truth, axis=0) / np.maximum(np.sum(w[:, None] * estimate ** 2, axis=0),
-                                                                        1e-300)
-    return estimate * scale
+    """``estimate`` (N, 3) times the per-channel least-squares scale onto ``truth`` (the gauge),
+    each row weighted by ``weights`` (N,) when given."""
+    root = np.ones((len(truth), 1)) if weights is None else np.sqrt(weights)[:, None]
+    return estimate * lstsq_scale(root * estimate, root * truth)
 
 
 def irradiance_error(estimate_radiance: np.ndarray, true_radiance: np.ndarray) -> float:

@@ -98,13 +98,14 @@ def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], render
     if renders.estimate is not None:
         pure = predictor.caster.face_id_buffers(cams, pure=True)
         masks = [(pu >= 0) & (r[..., 3] >= min_coverage) for pu, r in zip(pure, renders.estimate)]
-        renders_rgb, noise = [r[..., :3] for r in renders.estimate], None
+        halves = [r[..., :3] for r in renders.estimate]
+        renders_rgb, noise = halves, None
         if renders.estimate_twin is not None:
             twins = [t[..., :3] for t in renders.estimate_twin]
-            renders_rgb = [0.5 * (a + b) for a, b in zip(renders_rgb, twins)]
+            renders_rgb = [0.5 * (a + b) for a, b in zip(halves, twins)]
             # the mean of two renders deviates from its expectation by |A - B| / 2 (same variance each)
             noise = [float(0.5 * np.linalg.norm((a - b)[m]) / max(np.linalg.norm(p[m]), 1e-300))
-                     for a, b, p, m in zip([r[..., :3] for r in renders.estimate], twins, preds, masks)]
+                     for a, b, p, m in zip(halves, twins, preds, masks)]
         cross = ImageSet(names, renders_rgb, preds, masks, align=False, noise=noise,
                          note="Mitsuba path tracer (2 bounces) vs the estimator's forward model, "
                               "on pixels covered by one face alone")

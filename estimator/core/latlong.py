@@ -78,7 +78,8 @@ def _overlap(old_edges: np.ndarray, new_edges: np.ndarray, measure) -> sparse.cs
     last = np.clip(np.searchsorted(old_edges, new_edges[1:], side="left"), 1, len(old_edges) - 1)
     count = last - first
     row = np.repeat(np.arange(len(new_edges) - 1), count)
-    col = np.concatenate([np.arange(a, b) for a, b in zip(first, last)]) if len(row) else np.zeros(0, np.int64)
+    starts = np.cumsum(count) - count
+    col = first[row] + np.arange(len(row)) - starts[row]
     lo = np.maximum(new_edges[row], old_edges[col])
     hi = np.minimum(new_edges[row + 1], old_edges[col + 1])
     value = np.where(hi > lo, measure(hi) - measure(lo), 0.0)

@@ -85,7 +85,7 @@ def _dotted_value(item: str) -> tuple[str, object]:
 
     key, sep, text = item.partition("=")
     if not sep or not key.strip():
-        raise InputError(f"--set needs KEY=VALUE (a dotted scene-spec key), got {item!r}")
+        raise InputError(f"--set needs KEY=VALUE, got {item!r}")
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
@@ -332,27 +332,21 @@ def _positive_float(flag: str, text: str, auto: bool = False) -> float:
 def _estimator_sets(items: list[str]) -> dict:
     """``estimate --set KEY=VALUE``: any estimator setting (``KEY`` a field of
     :class:`estimator.EstimatorConfig`, optionally prefixed ``estimator.``), the value read as
-    JSON (numbers, true/false, null) or else as text. Unknown keys are named with the nearest."""
+    ``generate --set`` reads it (:func:`_dotted_value`). Unknown keys are named with the nearest."""
     import difflib
-    import json as jsonlib
 
     from estimator import EstimatorConfig
 
     known = [f.name for f in dataclasses.fields(EstimatorConfig)]
     out = {}
     for item in items:
-        key, sep, text = item.partition("=")
-        key = key.strip().removeprefix("estimator.")
-        if not sep or not key:
-            raise InputError(f"--set takes KEY=VALUE, got {item!r}")
+        key, value = _dotted_value(item)
+        key = key.removeprefix("estimator.")
         if key not in known:
             near = difflib.get_close_matches(key, known, n=3)
             raise InputError(f"--set {key}: not an estimator setting" + (f" (did you mean {', '.join(near)}?)"
                                                                           if near else ""))
-        try:
-            out[key] = jsonlib.loads(text)
-        except jsonlib.JSONDecodeError:
-            out[key] = text
+        out[key] = value
     return out
 
 
@@ -700,7 +694,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(cross-validation, in run.json)")
     e.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="any estimator setting (docs/estimator.md), e.g. --set retinex_ridge=0.01; the value is read "
-                        "as JSON, else as text; it wins over the flags above and the dataset's defaults")
+                        "as a TOML value, else as text; it wins over the flags above and the dataset's defaults")
     e.add_argument("--truth", metavar="DATASET", help="dataset whose ground_truth/ gives the known light of the "
                                                       "known-illumination oracle (default: the dataset itself)")
     _add_estimator_flags(e)

@@ -144,17 +144,14 @@ def _lens(where: str, frame: dict, top: dict) -> Lens | None:
         raise DatasetError(f"{where}: camera_model {model!r} is not supported (one of {', '.join(CAMERA_MODELS)}; "
                            "undistort the images first, e.g. with COLMAP's image_undistorter)")
     values = {key: frame.get(key, top.get(key, 0.0)) for key in COEFFICIENTS}
-    for key, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            raise DatasetError(f"{where}: lens distortion {key} must be a finite number, got {value!r}")
     if model in ("PINHOLE", "SIMPLE_PINHOLE"):
         if any(values.values()):
             key = next(k for k, v in values.items() if v)
             raise DatasetError(f"{where}: camera_model {model!r} has no lens distortion, but {key} = "
                                f"{values[key]!r}; write camera_model OPENCV (or OPENCV_FISHEYE) for a distorted lens")
         return None
-    try:
-        lens = Lens(model, **{k: float(v) for k, v in values.items()})
+    try:   # Lens names a coefficient that is not a finite number
+        lens = Lens(model, **values)
     except InputError as exc:
         raise DatasetError(f"{where}: {exc}") from None
     return None if lens.is_identity else lens

@@ -48,7 +48,8 @@ def polygon_count(path: str | os.PathLike) -> int | None:
         return None
     if ext == ".obj":
         with open(path, "rb") as f:
-            return sum(1 for line in f if line.startswith(b"f ") or line.startswith(b"f\t"))
+            data = b"\n" + f.read()
+        return data.count(b"\nf ") + data.count(b"\nf\t")
     return None
 
 
