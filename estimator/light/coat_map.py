@@ -43,7 +43,7 @@ ROWS_PER_VERTEX = 4  # rows beyond the per-face unknowns per map vertex for a de
 
 @dataclass
 class CoatMapConfig(Section):
-    """The light from the coat's reflection (:func:`fit_reflected_light`) and its gates.
+    """The light from the coat's reflection (:func:`fit_reflected_light`).
 
     Attributes
     ----------
@@ -51,28 +51,19 @@ class CoatMapConfig(Section):
         changes across views, every face's diffuse free, so no albedo can bias it).
     reflected_regions : try it on objects of uniform regions too (each region then takes its
         faces' median albedo under that light).
-    reflected_min_explained : the map's light is taken when the map is determined and
-        explains at least this share of the view changes (mean over the channels).
     reflected_sun_max_ratio : the map's brightest compact source becomes a sun with exact
         shadows when it lowers the edges' robust cost to at most this share.
     reflected_sun_max_angle : where the edge search kept a sun, the map's light replaces it
         only when the map's own sun lies within this many degrees of it (about a map cell).
-    reflected_diffuse_min_explained : where the map's light fails its gate, the map fit's
-        diffuse radiance (its reflection removed) is still used under the edges' light when
-        the map explains at least this share of the view changes.
     """
 
     reflected_light: bool = True
     reflected_regions: bool = True
-    reflected_min_explained: float = 0.982
     reflected_sun_max_ratio: float = 0.97
     reflected_sun_max_angle: float = 6.0
-    reflected_diffuse_min_explained: float = 0.9
 
     def check(self):
         return [
-            (0 <= self.reflected_min_explained <= 1, "reflected_min_explained must lie in [0, 1]"),
-            (0 <= self.reflected_diffuse_min_explained <= 1, "reflected_diffuse_min_explained must lie in [0, 1]"),
             (self.reflected_sun_max_ratio >= 0, "reflected_sun_max_ratio must be >= 0"),
             (0 <= self.reflected_sun_max_angle <= 180, "reflected_sun_max_angle must lie in [0, 180] degrees"),
         ]

@@ -34,7 +34,7 @@ class IndirectConfig(Section):
         becomes an unknown.
     """
 
-    interreflection: bool = False
+    interreflection: bool = True
 
 
 def indirect_shading(caster: RayCaster, sampling: SphereSampling, visibility: Visibility, radiance: np.ndarray,

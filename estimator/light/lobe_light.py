@@ -41,13 +41,14 @@ class LobeLightConfig(Section):
 
     Attributes
     ----------
-    reflected_lobe : try the lobe's light (SH radiance fitted to the colours' changes across
-        views, every face's diffuse free, no Fresnel, exponent ``phong_exponent``); it is
-        taken when it explains at least ``reflected_min_explained`` of the view changes and
-        more than the coat's map.
+    reflected_lobe : also offer the lobe's light (SH radiance fitted to the colours' changes
+        across views, every face's diffuse free, no Fresnel, exponent ``phong_exponent``) to
+        ``retinex-segmented``'s decision. Off by default: on the random family's development
+        seeds it never predicted the truth better than the edges' light, and once it
+        predicted the observations better with albedos far off.
     """
 
-    reflected_lobe: bool = True
+    reflected_lobe: bool = False
 
 
 @dataclass(frozen=True)

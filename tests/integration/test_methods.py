@@ -102,8 +102,8 @@ def test_config_validation():
         EstimatorConfig(min_cos_view=1.5)
     with pytest.raises(ValueError, match="diffuse_light"):
         EstimatorConfig(diffuse_light="true")
-    with pytest.raises(ValueError, match="reflected_diffuse_min_explained"):
-        EstimatorConfig(reflected_diffuse_min_explained=1.2)
+    with pytest.raises(ValueError, match="reflected_sun_max_angle"):
+        EstimatorConfig(reflected_sun_max_angle=200.0)
     with pytest.raises(ValueError, match="reflected_lobe"):
         EstimatorConfig(reflected_lobe=1)
 

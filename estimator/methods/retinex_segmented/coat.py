@@ -9,7 +9,7 @@ from ...core import sh
 from ...core.gauge import unit_dc
 from ...core.reductions import group_quantile
 from ...light import coat_map, edge_fit, sun
-from .shading import divide
+from .shading import at_indirect_scale, divide
 from .values import FitContext, Hypothesis, LightSource, Shading
 
 
@@ -27,14 +27,13 @@ def coat_map_fit(ctx: FitContext) -> coat_map.ReflectedLight:
 
 def coat_map_candidate(ctx: FitContext, regions: bool) -> coat_map.ReflectedLight | None:
     """The coat's map when this fit may take its light: ``reflected_light`` on (and
-    ``reflected_regions`` for an object of uniform regions), no interreflection term, the map
-    determined and explaining at least ``reflected_min_explained`` of the view changes (mean
-    over the channels)."""
+    ``reflected_regions`` for an object of uniform regions) and the map determined (at least
+    :data:`coat_map.ROWS_PER_VERTEX` rows per map vertex beyond the faces' unknowns)."""
     c = ctx.config
-    if not c.reflected_light or (regions and not c.reflected_regions) or c.interreflection:
+    if not c.reflected_light or (regions and not c.reflected_regions):
         return None
     fitted = coat_map_fit(ctx)
-    return fitted if fitted.determined and np.mean(fitted.explained) >= c.reflected_min_explained else None
+    return fitted if fitted.determined else None
 
 
 def coat_map_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: coat_map.ReflectedLight) -> Hypothesis | None:
@@ -56,6 +55,8 @@ def coat_map_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: coat_map.Ref
         edge_light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
         if shading.sun is None or np.all(edge_light[-1] > 0):   # no dark sun
             light, source = edge_light, LightSource.COAT_MAP_DIFFUSE
+    if source is LightSource.COAT_MAP:
+        light = at_indirect_scale(ctx, shading, radiance, light)
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
     labels = edges.labels
     if edges.regions:
@@ -87,7 +88,8 @@ def map_light(ctx: FitContext, fitted: coat_map.ReflectedLight, radiance: np.nda
     with_sun = np.zeros(3)
     for k in range(3):   # one unknown per channel: the sun's irradiance over the sky's
         pair = np.stack([sky_shading[:, k], sun_column], axis=1)
-        with_sun[k] = edge_fit.log_shading_fit(radiance[:, [k, k, k]], pair, ctx.edges, ctx.usable, **ctx.fit)[0][1, 0]
+        with_sun[k] = edge_fit.log_shading_fit(radiance[:, [k, k, k]], pair, ctx.edges, ctx.usable,
+                                               **ctx.plain_fit)[0][1, 0]
     both = sky_shading + with_sun * sun_column[:, None]
     ratio = edge_fit.edge_cost_ratio(edge_fit.edge_residuals(radiance, sky_shading, ctx.edges, ctx.usable),
                                      edge_fit.edge_residuals(radiance, np.maximum(both, 1e-300), ctx.edges, ctx.usable))
@@ -102,15 +104,14 @@ def coated_diffuse(ctx: FitContext, edges: Hypothesis) -> tuple[np.ndarray, Shad
     """The map fit's diffuse radiance (F, 3) (the coat's reflection removed, its exit
     transmission divided out; faces the map did not see keep the edges' radiance) and the
     shading through the coat (the edge search's sun through it too), where the map is
-    determined and explains at least ``reflected_diffuse_min_explained`` of the view changes:
-    the map's light errs where a source is narrower than a cell, but its reflection removed
-    per view is still closer to the diffuse radiance than a low quantile of the colours.
-    None otherwise (or with ``reflected_light`` off, or an interreflection term)."""
+    determined: the map's light errs where a source is narrower than a cell, but its
+    reflection removed per view may still be closer to the diffuse radiance than a low
+    quantile of the colours. None otherwise (or with ``reflected_light`` off)."""
     c, prep = ctx.config, ctx.prep
-    if not c.reflected_light or c.interreflection:
+    if not c.reflected_light:
         return None
     fitted = coat_map_fit(ctx)
-    if not fitted.determined or np.mean(fitted.explained) < c.reflected_diffuse_min_explained:
+    if not fitted.determined:
         return None
     mesh = prep.data.mesh
     shading = Shading(ctx.model.diffuse_matrix(mesh, prep.sampling, prep.visibility, coat_ior=c.coat_ior))
@@ -123,8 +124,8 @@ def coated_diffuse(ctx: FitContext, edges: Hypothesis) -> tuple[np.ndarray, Shad
 
 
 def coated_diffuse_hypothesis(ctx: FitContext, edges: Hypothesis) -> Hypothesis | None:
-    """The edges' light fitted on :func:`coated_diffuse`'s radiance and shading, where the
-    map's light itself failed its gate; None where :func:`coated_diffuse` is."""
+    """The edges' light fitted on :func:`coated_diffuse`'s radiance and shading; None where
+    :func:`coated_diffuse` is."""
     coated = coated_diffuse(ctx, edges)
     if coated is None:
         return None

@@ -1,46 +1,76 @@
 """How ``retinex-segmented`` decides where the light comes from: the one file to change for that.
 
-The first hypothesis is always the edges' (:func:`edge_hypothesis`: the albedo edges, a sun
-when one lowers their cost, uniform regions tied when they hold). Two fits of how the colours
-change across views may then replace it, because no albedo can bias them: the coat's lat-long
-map (a Fresnel dielectric coat) and a shared Phong lobe. Each is a candidate only when it
-explains at least ``reflected_min_explained`` of the view changes; where both are, the one
-that explains more is the candidate (a coat's map that wins but whose sun disagrees with the
-edges' falls back to the edges, not to the lobe). A texture whose coat's map explains the view changes well enough to
-remove the coat's reflection (``reflected_diffuse_min_explained``), but not to give the light,
-keeps the edges' light fitted on that cleaner diffuse radiance.
+Every hypothesis the data allow is formed (:func:`light_hypotheses`): the edges' (the albedo
+edges, a sun when one lowers their cost, uniform regions tied when they hold), and, because no
+albedo can bias them, those of the fits of how the colours change across views: the coat's
+lat-long map (a Fresnel dielectric coat), the edges' light on the map's diffuse radiance (the
+coat's reflection removed), and a shared Phong lobe. Each becomes an estimate, and one
+criterion computed without ground truth chooses among them (:func:`prediction_cost`): how well
+the estimate predicts the observations it was solved from, as a robust negative
+log-likelihood, with the Bayesian information criterion's price for each unknown.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ...diagnostics.trust import observation_residuals
 from ...light.sun import Sun
+from ...model.estimate import Estimate
+from ...pipeline.prepared import Prepared
+from ...solvers.robust import TUNING
 from .coat import coat_map_candidate, coat_map_hypothesis, coated_diffuse_hypothesis
 from .edges import edge_hypothesis
 from .lobe import lobe_candidate, lobe_hypothesis
 from .values import FitContext, Hypothesis, LightSource
 
 
-def decide_light(ctx: FitContext, radiance: np.ndarray, found: Sun | None) -> Hypothesis:
-    """The light of one fit, and the albedos and regions under it.
+def light_hypotheses(ctx: FitContext, radiance: np.ndarray, found: Sun | None) -> list[Hypothesis]:
+    """Every light hypothesis of one fit, the edges' first.
 
     ``radiance`` (F, 3): each face's diffuse radiance (a low quantile over the views);
     ``found``: the sun of an earlier fit (None: the edge stage searches for one)."""
     edges = edge_hypothesis(ctx, radiance, found)
+    out = [edges]
     coat_map = coat_map_candidate(ctx, regions=edges.regions > 0)
-    lobe = lobe_candidate(ctx)
-    if coat_map is not None and lobe is not None and np.mean(lobe.explained) > np.mean(coat_map.explained):
-        coat_map = None     # a lobe without Fresnel explains the view changes better than a coat
     if coat_map is not None:
-        taken = coat_map_hypothesis(ctx, edges, coat_map)   # None: its sun disagrees with the edges'
-        if taken is not None:
-            return taken
-    elif lobe is not None:
-        taken = lobe_hypothesis(ctx, edges, lobe)   # None: the lobe left no positive diffuse radiance
-        if taken is not None:
-            return taken
+        out.append(coat_map_hypothesis(ctx, edges, coat_map))   # None: its sun disagrees with the edges'
+    lobe = lobe_candidate(ctx)
+    if lobe is not None:
+        out.append(lobe_hypothesis(ctx, edges, lobe))            # None: the lobe left no diffuse radiance
     if edges.source is LightSource.EDGES and not edges.regions:
-        coated = coated_diffuse_hypothesis(ctx, edges)
-        if coated is not None:
-            return coated
-    return edges
+        out.append(coated_diffuse_hypothesis(ctx, edges))
+    return [h for h in out if h is not None]
+
+
+def prediction_cost(prep: Prepared, estimates: list[Estimate]) -> np.ndarray:
+    """(H,) the criterion of each estimate: the lower, the better it explains the observations.
+
+    On the observations of faces every estimate holds (so that each is judged on the same
+    data), the relative residuals r (:func:`observation_residuals`) are priced by the Cauchy
+    negative log-likelihood sum log(1 + (r / (c s))^2), c the Cauchy constant of 95 % Gaussian
+    efficiency and s one robust scale for all (1.4826 x the median |r| of the best-fitting
+    estimate: its residuals are the closest to the noise). Each unknown (the estimate's
+    ``degrees_of_freedom.unknowns``: albedos of its groups and the light) costs (1/2) ln n, n
+    the colour values compared: the Bayesian information criterion, so a hypothesis with a
+    free albedo per face wins over tied regions only when the data ask for it. No threshold
+    is fitted."""
+    held = np.logical_and.reduce([e.observed for e in estimates])[prep.obs.face]
+    residuals = [observation_residuals(prep, e)[1][held] for e in estimates]
+    n = 3 * int(held.sum())
+    if n == 0:
+        return np.zeros(len(estimates))
+    scale = max(min(1.4826 * float(np.median(np.abs(r))) for r in residuals), 1e-12)
+    nll = np.array([np.sum(np.log1p((r / (TUNING["cauchy"] * scale)) ** 2)) for r in residuals])
+    unknowns = np.array([e.info["degrees_of_freedom"]["unknowns"] for e in estimates], float)
+    return nll + 0.5 * unknowns * np.log(n)
+
+
+def choose(prep: Prepared, hypotheses: list[Hypothesis], estimates: list[Estimate]) -> Estimate:
+    """The estimate of least :func:`prediction_cost`; every hypothesis' source and cost are
+    recorded in its ``info['hypotheses']``."""
+    costs = prediction_cost(prep, estimates) if len(estimates) > 1 else np.zeros(1)
+    best = int(np.argmin(costs))
+    chosen = estimates[best]
+    chosen.info["hypotheses"] = [{"light_from": h.source.value, "cost": float(cost), "chosen": i == best}
+                                 for i, (h, cost) in enumerate(zip(hypotheses, costs))]
+    return chosen

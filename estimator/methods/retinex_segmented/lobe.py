@@ -10,36 +10,22 @@ from ...light import edge_fit, lobe_light, sun
 from ...model.reflection import diffuse_matrix, lobe_matrix, mirror_directions, phong_lobe
 from ...pipeline.observations import Observations
 from ...solvers.segmentation import segment
-from .shading import deviation, divide
+from .shading import at_indirect_scale, deviation, divide
 from .values import FitContext, Hypothesis, LightSource, Shading
-
-LOBE_PREVIEW = 4   # the lobe's gate is first tried on every 4th face: a coat or a bare surface is far below it
 
 
 def lobe_candidate(ctx: FitContext) -> lobe_light.LobeLight | None:
     """The light a shared Phong lobe reflects, fitted once per solve on the observations before
-    any coat correction, when ``reflected_lobe`` is on, there is no interreflection term, the
-    rows fit in memory and it explains at least ``reflected_min_explained`` of the view changes
-    (mean over the channels). A first fit on every :data:`LOBE_PREVIEW`-th face decides
-    whether the whole fit is worth its time."""
+    any coat correction, when ``reflected_lobe`` is on and the rows fit in memory."""
     c, prep, fits = ctx.config, ctx.prep, ctx.fits
-    if not c.reflected_lobe or c.interreflection or prep.streamed:
+    if not c.reflected_lobe or prep.streamed:
         return None
     if fits.lobe is None:
         obs = fits.observations
-        if prep.model.name == "lobe" and obs is prep.obs:
-            rows = prep.d_rows
-        else:
-            part = obs.face % LOBE_PREVIEW == 0
-            preview = lobe_light.fit_lobe_light(obs.face[part], obs.rgb[part], lobe_rows(ctx, obs, part),
-                                                obs.num_faces, loss=ctx.loss)
-            if np.mean(preview.explained) < c.reflected_min_explained - 0.05:
-                fits.lobe = (preview, None)
-                return None
-            rows = lobe_rows(ctx, obs, np.ones(len(obs.face), bool))
+        rows = prep.d_rows if prep.model.name == "lobe" and obs is prep.obs else lobe_rows(
+            ctx, obs, np.ones(len(obs.face), bool))
         fits.lobe = (lobe_light.fit_lobe_light(obs.face, obs.rgb, rows, obs.num_faces, loss=ctx.loss), rows)
-    fitted, rows = fits.lobe
-    return fitted if rows is not None and np.mean(fitted.explained) >= c.reflected_min_explained else None
+    return fits.lobe[0]
 
 
 def lobe_rows(ctx: FitContext, obs: Observations, rows: np.ndarray) -> np.ndarray:
@@ -62,6 +48,7 @@ def lobe_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: lobe_light.LobeL
         radiance, light, shading = lobe_reflected_light(ctx, fitted, edges.found)
     except InputError:
         return None
+    light = at_indirect_scale(ctx, shading, radiance, light)
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
     labels, _ = segment(np.where(lit[:, None], albedo, 1.0), ctx.edges, lit, c.segment_threshold, c.uniform_spread)
     share, regions = float(np.mean(labels[lit] >= 0)), int(labels.max()) + 1

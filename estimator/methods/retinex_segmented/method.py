@@ -13,7 +13,7 @@ from ...core.settings import Section
 from ...light import coat, indirect, sun
 from ...model.estimate import Estimate
 from ..base import Method, register_method
-from .decision import decide_light
+from .decision import choose, light_hypotheses
 from .result import to_estimate
 from .values import FitContext, LightSource, ReflectionFits
 
@@ -70,21 +70,13 @@ class RetinexSegmented(Method):
        (:mod:`estimator.light.coat`), scaled down until at most ``coat_max_negative`` more of the
        observations would turn non-positive, subtracted, and steps 1-5 run again.
 
-    On a coated object (a texture, or uniform regions with ``reflected_regions``) the light
-    comes instead from the coat's reflection (:mod:`estimator.light.coat_map`), which no albedo
-    can bias, when that map is determined and explains at least ``reflected_min_explained`` of
-    the view changes and, where the edge search kept a sun, the map's own sun lies within
-    ``reflected_sun_max_angle`` of it; step 6 is then skipped. The albedo is
-    then that fit's diffuse radiance (the coat's reflection removed, its exit transmission
-    1 - F(n . v) divided out) over the light's shading through the coat (the cosine weighted
-    by 1 - F(n . w) on the way in, as in Mitsuba's ``plastic``); on a texture the light's SH
-    part is fitted to the edges of that diffuse radiance, beside the map's sun. Where the
-    map's light fails that gate but the map explains at least
-    ``reflected_diffuse_min_explained``, the light still comes from the edges, fitted on
-    that diffuse radiance through the coat. Where a
-    shared Phong lobe without Fresnel explains the view changes better than the coat
-    (``reflected_lobe``), the light comes from the lobe's reflection
-    (:mod:`estimator.light.lobe_light`) and regions are found again under it.
+    With ``interreflection`` each face's shading also holds the light the object reflects
+    onto it (:mod:`estimator.light.indirect`). Beside the edges' light, the light of the coat's
+    reflection (:mod:`estimator.light.coat_map`, when that map is determined), the edges'
+    light on the map's diffuse radiance (a texture) and, with ``reflected_lobe``, a shared
+    Phong lobe's (:mod:`estimator.light.lobe_light`) are each turned into an estimate, and the
+    one that best predicts the observations, at the Bayesian information criterion's price
+    per unknown, is kept (:mod:`.decision`); step 6 is skipped when it models the coat.
     """
 
     name = "retinex-segmented"
@@ -133,4 +125,5 @@ class RetinexSegmented(Method):
         if c.interreflection:
             ctx.fit["indirect"] = ctx.extra = indirect.indirect_shading(
                 prep.caster, prep.sampling, prep.visibility, np.where(usable[:, None], radiance, 0.0))
-        return to_estimate(ctx, decide_light(ctx, radiance, found), self)
+        hypotheses = light_hypotheses(ctx, radiance, found)
+        return choose(prep, hypotheses, [to_estimate(ctx, h, self) for h in hypotheses])

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .values import Shading
+from ...light import edge_fit
+from .values import FitContext, Shading
 
 
 def divide(shading: Shading, radiance: np.ndarray, light: np.ndarray, usable: np.ndarray,
@@ -23,3 +24,23 @@ def divide(shading: Shading, radiance: np.ndarray, light: np.ndarray, usable: np
 def deviation(albedo: np.ndarray, reference: np.ndarray) -> float:
     """The median over rows of the mean over channels of |log(albedo / reference)| (both (n, 3))."""
     return float(np.median(np.abs(np.log(np.maximum(albedo, 1e-12) / np.maximum(reference, 1e-12))).mean(axis=1)))
+
+
+def at_indirect_scale(ctx: FitContext, shading: Shading, radiance: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """``light`` (M', 3) rescaled per channel to the units of the indirect shading ``ctx.extra``.
+
+    A light found from the colours' changes across views (a coat's map, a lobe) has a unit DC
+    or an unknown one; the light the object reflects onto itself is in radiance units, so the
+    direct light's scale against it is one unknown per channel, fitted to the albedo edges
+    (:func:`edge_fit.log_shading_fit` on the light's shading as one column). Unchanged without
+    an interreflection term."""
+    if np.isscalar(ctx.extra):
+        return light
+    shade = shading.columns @ light                                                      # (F, 3)
+    scale = np.ones(3)
+    for k in range(3):   # faces whose radiance and direct shading are positive in this channel
+        usable = ctx.usable & np.isfinite(radiance[:, k]) & (radiance[:, k] > 0) & (shade[:, k] > 0)
+        if usable.sum() >= 2:
+            scale[k] = edge_fit.log_shading_fit(radiance[:, [k, k, k]], shade[:, [k]], ctx.edges, usable,
+                                                **ctx.plain_fit, indirect=ctx.extra[:, [k, k, k]])[0][0, 0]
+    return light * scale

@@ -85,12 +85,12 @@ class Hypothesis:
 @dataclass
 class ReflectionFits:
     """The view-dependent fits of one solve, made on first need from the observations before any
-    coat correction: the coat's map, and the lobe's light with its rows (None rows: the preview
-    on a subset of faces failed the gate)."""
+    coat correction: the coat's map, and the lobe's light with the lobe rows of every
+    observation."""
 
     observations: Observations
     coat_map: ReflectedLight | None = None
-    lobe: tuple[LobeLight, np.ndarray | None] | None = None
+    lobe: tuple[LobeLight, np.ndarray] | None = None
 
 
 @dataclass
@@ -107,6 +107,12 @@ class FitContext:
     usable: np.ndarray
     fit: dict[str, Any] = field(default_factory=dict)
     extra: Any = 0.0   # (F, 3) indirect shading, or 0.0
+
+    @property
+    def plain_fit(self) -> dict[str, Any]:
+        """The edge fit's keyword arguments without the indirect shading (a fit of ratios between
+        columns, whose scale the indirect term must not set)."""
+        return {k: v for k, v in self.fit.items() if k != "indirect"}
 
     @property
     def sky_width(self) -> int:

@@ -1,0 +1,75 @@
+"""The default method's decision among its light hypotheses (the prediction cost with the BIC's
+price per unknown) and the direct light's scale against the object's own reflected light."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from estimator.methods.retinex_segmented.decision import prediction_cost
+from estimator.methods.retinex_segmented.shading import at_indirect_scale
+from estimator.methods.retinex_segmented.values import Shading
+
+FACES, VIEWS = 40, 6
+
+
+def _problem(seed=0):
+    """Observations of FACES faces in VIEWS views under a fixed (F, 3) shading and no gloss."""
+    rng = np.random.default_rng(seed)
+    shade = rng.uniform(0.5, 1.5, (FACES, 3))
+    albedo = rng.uniform(0.1, 0.8, (FACES, 3))
+    face = np.repeat(np.arange(FACES), VIEWS)
+    rgb = albedo[face] * shade[face] * (1 + 0.01 * rng.normal(size=(len(face), 3)))
+    prep = SimpleNamespace(obs=SimpleNamespace(face=face, rgb=rgb), shading=lambda light: shade,
+                           gloss=lambda light: np.zeros((len(face), 3)))
+    return prep, albedo
+
+
+def _estimate(albedo, unknowns, observed=None):
+    return SimpleNamespace(diffuse=albedo, specular=np.zeros_like(albedo), light=np.zeros((1, 3)),
+                           observed=np.ones(FACES, bool) if observed is None else observed,
+                           info={"degrees_of_freedom": {"unknowns": unknowns}})
+
+
+def test_the_estimate_that_predicts_the_observations_costs_less():
+    prep, albedo = _problem()
+    wrong = albedo * np.where(np.arange(FACES)[:, None] % 3 == 0, 1.3, 1.0)   # a third of the faces 30 % off
+    cost = prediction_cost(prep, [_estimate(albedo, 120), _estimate(wrong, 120)])
+    assert cost.shape == (2,) and cost[0] < cost[1]
+
+
+def test_each_unknown_costs_half_the_log_of_the_values_compared():
+    prep, albedo = _problem()
+    cost = prediction_cost(prep, [_estimate(albedo, 10), _estimate(albedo, 130)])
+    np.testing.assert_allclose(cost[1] - cost[0], 0.5 * 120 * np.log(3 * FACES * VIEWS), rtol=1e-12)
+
+
+def test_only_the_faces_every_estimate_holds_are_compared():
+    prep, albedo = _problem()
+    wrong = albedo.copy()
+    wrong[:5] *= 3.0                                  # wrong only where the other estimate holds no face
+    held = np.arange(FACES) >= 5
+    cost = prediction_cost(prep, [_estimate(albedo, 50, held), _estimate(wrong, 50)])
+    np.testing.assert_allclose(cost[0], cost[1], rtol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [[2.0, 3.0, 0.5], [1.0, 1.0, 1.0]])
+def test_the_direct_light_is_scaled_to_the_indirect_shadings_units(scale):
+    """Faces of one albedo on a chain: radiance = s * direct + indirect; the scale s of each
+    channel is recovered from the albedo edges (1e-6 relative)."""
+    rng = np.random.default_rng(3)
+    direct = rng.uniform(0.2, 1.0, (FACES, 1))
+    indirect = rng.uniform(0.05, 0.3, (FACES, 3))
+    radiance = np.asarray(scale) * direct + indirect
+    edges = np.stack([np.arange(FACES - 1), np.arange(1, FACES)], axis=1)
+    ctx = SimpleNamespace(extra=indirect, usable=np.ones(FACES, bool), edges=edges,
+                          plain_fit={"loss": "none", "ridge": 0.0, "iterations": 50})
+    light = at_indirect_scale(ctx, Shading(direct), radiance, np.ones((1, 3)))
+    np.testing.assert_allclose(light[0], scale, rtol=1e-6)
+
+
+def test_without_an_indirect_term_the_light_is_unchanged():
+    ctx = SimpleNamespace(extra=0.0)
+    light = np.arange(6.0).reshape(2, 3)
+    assert at_indirect_scale(ctx, Shading(np.ones((FACES, 2))), np.ones((FACES, 3)), light) is light
