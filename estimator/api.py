@@ -113,13 +113,15 @@ def _screen_and_diagnose(prep, est: Estimate, view_names: list[str],
     if not est.observed.any():
         raise InputError("no face has a finite albedo within the physical range: the observations do not "
                          "determine the albedos and the light (too few lit views or faces?)")
-    loose = np.zeros(len(est.observed), bool)
+    code = np.zeros(len(est.observed), np.int8)
     if fitted:
         diffuse_precision, specular_precision = trust.albedo_precision(prep, est)
-        loose = screening.undetermined(est, specular_precision if est.config.components == "specular"
-                                       else diffuse_precision)
-    if loose.any():
-        counts.update(screening.mark_unestimated(est, np.where(loose, 3, 0).astype(np.int8)))
+        own = specular_precision if est.config.components == "specular" else diffuse_precision
+        code[screening.undetermined(est, own)] = 3
+        rows = np.bincount(prep.obs.face, minlength=len(code))
+        code[(code == 0) & screening.contradicted(est, own, rows)] = 4
+    if code.any():
+        counts.update(screening.mark_unestimated(est, code))
         if not est.observed.any():
             raise InputError("no face's albedo is determined by the observations (each one's standard error "
                              "exceeds its value): add views or light")

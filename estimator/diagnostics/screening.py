@@ -1,7 +1,7 @@
 """Faces whose albedo the observations do not determine: found after the solve, marked
 unestimated with a reason, and never reported as a number.
 
-Three reasons, each a property of the data or of physics, none fitted to a scene:
+Four reasons, each a property of the data or of physics, none fitted to a scene:
 
 * ``non-finite``: the solve gave NaN or infinity.
 * ``beyond physical range``: a channel of the albedo is negative, or exceeds
@@ -14,6 +14,10 @@ Three reasons, each a property of the data or of physics, none fitted to a scene
   when the method shares one albedo over a region) is at least :data:`MAX_RELATIVE_SE` times
   the face's whole albedo (diffuse plus specular): at one sigma the observations cannot tell
   it from zero.
+* ``contradicted by its observations``: the face shares one albedo with others (a region),
+  it has observations, and every one of them is an outlier under the estimate: its own data
+  reject the albedo its region gave it (a face joined to a region by its neighbours, whose
+  colour is another region's).
 """
 from __future__ import annotations
 
@@ -24,7 +28,7 @@ from ..model.estimate import Estimate
 DARKEST_ALBEDO = 0.01                  # black velvet, carbon black: the darkest real reflectances
 MAX_ALBEDO_RATIO = 1.0 / DARKEST_ALBEDO
 MAX_RELATIVE_SE = 1.0
-REASONS = ("non-finite", "beyond physical range", "undetermined")
+REASONS = ("non-finite", "beyond physical range", "undetermined", "contradicted by its observations")
 
 
 def out_of_range(est: Estimate) -> np.ndarray:
@@ -65,6 +69,16 @@ def undetermined(est: Estimate, precision: np.ndarray) -> np.ndarray:
     out = np.zeros(len(albedo), bool)
     out[np.nonzero(observed)[0]] = relative >= MAX_RELATIVE_SE
     return out
+
+
+def contradicted(est: Estimate, precision: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(F,) bool faces that share their label with other faces, have observations (``rows``
+    (F,) their count) and no inlier among them: ``precision`` (F, 3), the face's own precision
+    (:func:`trust.albedo_precision`, inlier rows only), is zero in every channel."""
+    labels = np.where(est.observed, est.labels, -1)
+    sizes = np.bincount(labels[labels >= 0], minlength=1)
+    shared = (labels >= 0) & (sizes[np.maximum(labels, 0)] > 1)
+    return shared & (rows > 0) & np.all(precision <= 0, axis=1)
 
 
 def mark_unestimated(est: Estimate, code: np.ndarray) -> dict[str, int]:

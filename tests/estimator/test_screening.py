@@ -37,6 +37,18 @@ def test_a_region_is_judged_by_its_summed_precision():
     assert alone.all() and not shared.any()
 
 
+def test_a_region_face_whose_own_observations_all_reject_its_albedo_is_contradicted():
+    """Faces 0-3 share a region; face 2 has rows but no inlier (zero own precision), face 3 has
+    no row at all (its region speaks for it), face 4 is alone (the SE test judges it)."""
+    precision = np.full((5, 3), 2.0)
+    precision[2] = 0.0
+    precision[3] = 0.0
+    precision[4] = 0.0
+    rows = np.array([4, 4, 3, 0, 2])
+    out = screening.contradicted(_estimate(np.full((5, 3), 0.5), labels=[0, 0, 0, 0, 1]), precision, rows)
+    np.testing.assert_array_equal(out, [False, False, True, False, False])
+
+
 def test_marked_faces_are_zero_unlabelled_and_counted():
     est = _estimate(np.full((3, 3), 0.4))
     counts = screening.mark_unestimated(est, np.array([0, 2, 3], np.int8))
