@@ -73,3 +73,19 @@ def test_without_an_indirect_term_the_light_is_unchanged():
     ctx = SimpleNamespace(extra=0.0)
     light = np.arange(6.0).reshape(2, 3)
     assert at_indirect_scale(ctx, Shading(np.ones((FACES, 2))), np.ones((FACES, 3)), light) is light
+
+
+def test_a_term_added_to_the_prediction_is_judged_with_its_unknowns():
+    """Observations that hold a coat's reflection on top of the diffuse: the estimate whose
+    prediction has it added back costs less, although it pays for three more unknowns; the
+    same term added where the observations lack it costs more."""
+    prep, albedo = _problem()
+    coat = np.full((len(prep.obs.face), 3), 0.05) * (1 + np.arange(len(prep.obs.face)) % VIEWS)[:, None]
+    bare = prep.obs.rgb.copy()
+    prep.obs.rgb = bare + coat
+    est = _estimate(albedo, 120)
+    with_coat, without = prediction_cost(prep, [est, est], [coat, None], [3, 0])
+    assert with_coat < without
+    prep.obs.rgb = bare
+    with_coat, without = prediction_cost(prep, [est, est], [coat, None], [3, 0])
+    assert with_coat > without

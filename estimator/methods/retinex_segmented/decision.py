@@ -17,7 +17,7 @@ from ...diagnostics.trust import observation_residuals
 from ...light.sun import Sun
 from ...model.estimate import Estimate
 from ...pipeline.prepared import Prepared
-from ...solvers.robust import TUNING
+from ...solvers.robust import TUNING, relative_residuals
 from .coat import coat_map_candidate, coat_map_hypothesis, coated_diffuse_hypothesis
 from .edges import edge_hypothesis
 from .lobe import lobe_candidate, lobe_hypothesis
@@ -42,8 +42,13 @@ def light_hypotheses(ctx: FitContext, radiance: np.ndarray, found: Sun | None) -
     return [h for h in out if h is not None]
 
 
-def prediction_cost(prep: Prepared, estimates: list[Estimate]) -> np.ndarray:
+def prediction_cost(prep: Prepared, estimates: list[Estimate], added: list[np.ndarray | None] | None = None,
+                    extra_unknowns: list[int] | None = None) -> np.ndarray:
     """(H,) the criterion of each estimate: the lower, the better it explains the observations.
+
+    ``added``: per estimate, None or (N, 3) colours its model adds to the estimate's own
+    prediction of each observation (a coat's reflection subtracted before the solve), with
+    ``extra_unknowns`` the unknowns that term took.
 
     On the observations of faces every estimate holds (so that each is judged on the same
     data), the relative residuals r (:func:`observation_residuals`) are priced by the Cauchy
@@ -55,13 +60,19 @@ def prediction_cost(prep: Prepared, estimates: list[Estimate]) -> np.ndarray:
     free albedo per face wins over tied regions only when the data ask for it. No threshold
     is fitted."""
     held = np.logical_and.reduce([e.observed for e in estimates])[prep.obs.face]
-    residuals = [observation_residuals(prep, e)[1][held] for e in estimates]
+    added = added or [None] * len(estimates)
+    rgb = prep.obs.rgb
+    residuals = []
+    for e, more in zip(estimates, added):
+        predicted = rgb - observation_residuals(prep, e)[0] + (0.0 if more is None else more)
+        residuals.append(relative_residuals(rgb[held], predicted[held]))
     n = 3 * int(held.sum())
     if n == 0:
         return np.zeros(len(estimates))
     scale = max(min(1.4826 * float(np.median(np.abs(r))) for r in residuals), 1e-12)
     nll = np.array([np.sum(np.log1p((r / (TUNING["cauchy"] * scale)) ** 2)) for r in residuals])
     unknowns = np.array([e.info["degrees_of_freedom"]["unknowns"] for e in estimates], float)
+    unknowns += np.asarray(extra_unknowns or 0, float)
     return nll + 0.5 * unknowns * np.log(n)
 
 

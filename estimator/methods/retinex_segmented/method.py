@@ -13,7 +13,7 @@ from ...core.settings import Section
 from ...light import coat, indirect, sun
 from ...model.estimate import Estimate
 from ..base import Method, register_method
-from .decision import choose, light_hypotheses
+from .decision import choose, light_hypotheses, prediction_cost
 from .result import to_estimate
 from .values import FitContext, LightSource, ReflectionFits
 
@@ -68,7 +68,9 @@ class RetinexSegmented(Method):
     6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
        light's low orders (``coat_order``) is fitted to the colours' changes across views
        (:mod:`estimator.light.coat`), scaled down until at most ``coat_max_negative`` more of the
-       observations would turn non-positive, subtracted, and steps 1-5 run again.
+       observations would turn non-positive, subtracted, and steps 1-5 run again; the
+       corrected fit is kept when it predicts the colours as recorded (its coat's reflection
+       added back) at a lower :func:`.decision.prediction_cost`, the weights three more unknowns.
 
     With ``interreflection`` each face's shading also holds the light the object reflects
     onto it (:mod:`estimator.light.indirect`). Beside the edges' light, the light of the coat's
@@ -102,7 +104,15 @@ class RetinexSegmented(Method):
                 s = est.info["sun"]
                 found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
                                       c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
-                est = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), fits, found)
+                coated = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), fits, found)
+                # the same criterion, on the colours as observed: the coated fit predicts them
+                # with its coat's reflection added back, at three more unknowns (the weights)
+                costs = prediction_cost(prep, [est, coated], [None, weight * rows], [0, 3])
+                if costs[1] < costs[0]:
+                    est = coated
+                else:
+                    weight = np.zeros(3)  # the coat does not pay its way: not applied
+                est.info["coat_costs"] = costs.tolist()
             else:
                 weight = np.zeros(3)  # negligible: not applied
         est.info["coat_weight"] = weight.tolist()
