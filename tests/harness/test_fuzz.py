@@ -63,21 +63,26 @@ def _workspace(micro_dataset):
     return work, ds
 
 
-@FUZZ
-@given(line=st.integers(0, 200), value=st.sampled_from(TOML_VALUES), drop=st.booleans())
-def test_mutated_specs(line, value, drop, capsys):
-    lines = open(MICRO).read().splitlines()
+def _mutate_toml(path: str, line: int, value: str, drop: bool) -> str:
+    """The TOML file at ``path`` with its ``line``-th assignment (modulo their count) dropped,
+    or its value replaced by ``value``."""
+    lines = open(path).read().splitlines()
     assignments = [i for i, text in enumerate(lines) if " = " in text and not text.startswith("#")]
     index = assignments[line % len(assignments)]
     if drop:
         del lines[index]
     else:
-        key = lines[index].split(" = ")[0]
-        lines[index] = f"{key} = {value}"
+        lines[index] = f"{lines[index].split(' = ')[0]} = {value}"
+    return "\n".join(lines) + "\n"
+
+
+@FUZZ
+@given(line=st.integers(0, 200), value=st.sampled_from(TOML_VALUES), drop=st.booleans())
+def test_mutated_specs(line, value, drop, capsys):
     work = tempfile.mkdtemp(prefix="fuzz-")
     try:
         spec = os.path.join(work, "spec.toml")
-        open(spec, "w").write("\n".join(lines) + "\n")
+        open(spec, "w").write(_mutate_toml(MICRO, line, value, drop))
         run_and_check(["generate", spec, "-o", os.path.join(work, "out")], [spec], capsys)
     finally:
         shutil.rmtree(work)
@@ -202,17 +207,10 @@ SUITE_VALUES = TOML_VALUES + ['"no-such-scene"', '["bilinear-clustered", 3]', '{
 def test_mutated_suites(line, value, drop, capsys):
     """A suite file with one line changed or dropped, expanded by ``bench --dry-run`` (nothing runs)."""
     smoke = os.path.join(os.path.dirname(MICRO), "..", "..", "scenes", "suites", "smoke.toml")
-    lines = open(smoke).read().splitlines()
-    assignments = [i for i, text in enumerate(lines) if " = " in text and not text.startswith("#")]
-    index = assignments[line % len(assignments)]
-    if drop:
-        del lines[index]
-    else:
-        lines[index] = f"{lines[index].split(' = ')[0]} = {value}"
     work = tempfile.mkdtemp(prefix="fuzz-")
     try:
         suite = os.path.join(work, "suite.toml")
-        open(suite, "w").write("\n".join(lines) + "\n")
+        open(suite, "w").write(_mutate_toml(smoke, line, value, drop))
         run_and_check(["bench", suite, "-o", os.path.join(work, "out"), "--dry-run"], [suite], capsys)
         assert not os.path.exists(os.path.join(work, "out"))
     finally:

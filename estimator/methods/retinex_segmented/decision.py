@@ -17,7 +17,7 @@ from ...diagnostics.trust import observation_residuals
 from ...light.sun import Sun
 from ...model.estimate import Estimate
 from ...pipeline.prepared import Prepared
-from ...solvers.robust import TUNING, relative_residuals
+from ...solvers.robust import TUNING, relative_residuals, robust_scale
 from .coat import coat_map_candidate, coat_map_hypothesis, coated_diffuse_hypothesis
 from .edges import edge_hypothesis
 from .lobe import lobe_candidate, lobe_hypothesis
@@ -69,7 +69,7 @@ def prediction_cost(prep: Prepared, estimates: list[Estimate], added: list[np.nd
     n = 3 * int(held.sum())
     if n == 0:
         return np.zeros(len(estimates))
-    scale = max(min(1.4826 * float(np.median(np.abs(r))) for r in residuals), 1e-12)
+    scale = min(robust_scale(r, floor=1e-12) for r in residuals)
     nll = np.array([np.sum(np.log1p((r / (TUNING["cauchy"] * scale)) ** 2)) for r in residuals])
     unknowns = np.array([e.info["degrees_of_freedom"]["unknowns"] for e in estimates], float)
     unknowns += np.asarray(extra_unknowns or 0, float)

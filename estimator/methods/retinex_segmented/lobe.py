@@ -22,17 +22,16 @@ def lobe_candidate(ctx: FitContext) -> lobe_light.LobeLight | None:
         return None
     if fits.lobe is None:
         obs = fits.observations
-        rows = prep.d_rows if prep.model.name == "lobe" and obs is prep.obs else lobe_rows(
-            ctx, obs, np.ones(len(obs.face), bool))
+        rows = prep.d_rows if prep.model.name == "lobe" and obs is prep.obs else lobe_rows(ctx, obs)
         fits.lobe = (lobe_light.fit_lobe_light(obs.face, obs.rgb, rows, obs.num_faces, loss=ctx.loss), rows)
     return fits.lobe[0]
 
 
-def lobe_rows(ctx: FitContext, obs: Observations, rows: np.ndarray) -> np.ndarray:
-    """(n, M) the Phong lobe rows (exponent ``phong_exponent``) of the observations ``rows`` (N,) bool."""
+def lobe_rows(ctx: FitContext, obs: Observations) -> np.ndarray:
+    """(N, M) the Phong lobe rows (exponent ``phong_exponent``) of the observations ``obs``."""
     prep = ctx.prep
-    normals = prep.data.mesh.face_normals[obs.face[rows]]
-    return lobe_matrix(obs.face[rows], mirror_directions(normals, obs.view_dir[rows]), prep.sampling,
+    normals = prep.data.mesh.face_normals[obs.face]
+    return lobe_matrix(obs.face, mirror_directions(normals, obs.view_dir), prep.sampling,
                        prep.visibility, ctx.config.sh_order, ctx.config.phong_exponent)
 
 
