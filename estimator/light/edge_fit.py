@@ -103,7 +103,8 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     ridge : weight of the (l (l + 1))^2 penalty on the light's coefficients, per row.
     iterations : Gauss-Newton steps per channel (stops earlier when the step is tiny).
     indirect : (F, 3) shading added to C L (light the object reflects onto itself,
-        :mod:`estimator.light.indirect`); it fixes the light's scale, so the DC is fitted too.
+        :mod:`estimator.light.indirect`); it fixes the light's scale, so the DC is fitted too
+        and the ridge weighs the coefficients over the DC (the shape, as without it).
 
     Returns
     -------
@@ -173,8 +174,12 @@ def _fit_channel(ell, c_matrix, incidence, member, group, regions, light, usable
         # face that sees no sky), which no edge or region row reads
         gradient_rows = np.where(usable[:, None], c_matrix[:, first:] / np.where(usable, shade, 1.0)[:, None], 0.0)
         normal, gradient = _normal_equations(gradient_rows, incidence, member, group, regions, weights, residual)
-        normal[:k, :k] += np.diag(penalty)
-        gradient[:k] += penalty * light[first:]
+        # the ridge on the light relative to its DC: with an ``extra`` shading the scale is
+        # free, and a ridge on the coefficients themselves would shrink the whole light until
+        # the (faint) extra term is as bright as the direct, bending its shape
+        relative = penalty if first else penalty / max(light[0] ** 2, 1e-300)
+        normal[:k, :k] += np.diag(relative)
+        gradient[:k] += relative * light[first:]
         step = -np.linalg.solve(normal + 1e-12 * np.trace(normal) / n * np.eye(n), gradient)
         t = 1.0
         while t > 1e-4:

@@ -84,6 +84,20 @@ def test_an_additive_indirect_shading_fixes_the_scale():
     np.testing.assert_allclose(fit, light, rtol=1e-3, atol=1e-4)
 
 
+def test_the_ridge_weighs_the_light_relative_to_its_dc():
+    """A faint indirect term (1-1.5 % of the direct) fixes the light's scale only weakly: the
+    ridge must weigh the light's shape as it does without that term (relative to the DC),
+    not its coefficients themselves, which it would shrink, whole light and all, until the
+    faint term bends the shape (measured: 0.12 off in a coefficient at ridge 1e-3)."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    extra = 0.01 * (1 + 0.5 * np.sin(np.arange(len(radiance))))[:, None] * np.ones(3)
+    radiance = albedo * (c_matrix @ light + extra)
+    usable = np.ones(len(radiance), bool)
+    fit, _ = log_shading_fit(radiance, c_matrix, edges, usable, indirect=extra, ridge=1e-3)
+    plain, _ = log_shading_fit(radiance, c_matrix, edges, usable, ridge=1e-3)
+    np.testing.assert_allclose(fit / fit[0], plain / plain[0], atol=0.03)   # measured: 0.017
+
+
 def test_a_dc_only_light_has_nothing_to_fit():
     """One column (SH order 0, the gauge) and no regions: the light is the unit DC, with no
     division by the empty system's size."""

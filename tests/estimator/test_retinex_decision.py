@@ -1,15 +1,18 @@
 """The default method's decision among its light hypotheses (the prediction cost with the BIC's
-price per unknown) and the direct light's scale against the object's own reflected light."""
+price per unknown), the direct light's scale against the object's own reflected light, and the
+gauge its regions are found in."""
 from __future__ import annotations
 
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import trimesh
 
 from estimator.methods.retinex_segmented.decision import prediction_cost
-from estimator.methods.retinex_segmented.shading import at_indirect_scale
+from estimator.methods.retinex_segmented.shading import at_indirect_scale, in_unit_dc
 from estimator.methods.retinex_segmented.values import Shading
+from estimator.solvers.segmentation import segment
 
 FACES, VIEWS = 40, 6
 
@@ -89,3 +92,24 @@ def test_a_term_added_to_the_prediction_is_judged_with_its_unknowns():
     prep.obs.rgb = bare
     with_coat, without = prediction_cost(prep, [est, est], [coat, None], [3, 0])
     assert with_coat > without
+
+
+def test_the_regions_found_do_not_depend_on_the_lights_colour():
+    """The segmentation compares colours; the light's per-channel scale (which only the faint
+    interreflection pins) must not enter them: albedos under a light k times brighter per
+    channel (so 1/k the albedos) are segmented exactly alike, where without the unit-DC gauge
+    a red light 20 times too dim merges two regions that differ in red."""
+    rng = np.random.default_rng(1)
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    edges = np.asarray(mesh.face_adjacency)
+    top = mesh.triangles_center[:, 1] > 0
+    albedo = np.where(top[:, None], [0.6, 0.3, 0.3], [0.3, 0.3, 0.3]) * (1 + 0.005 * rng.normal(size=(len(top), 3)))
+    light = np.array([[1.0, 1.0, 1.0], [0.3, 0.2, 0.1]])
+    valid = np.ones(len(top), bool)
+    k = np.array([20.0, 1.0, 1.0])
+    plain, _ = segment(in_unit_dc(albedo, light), edges, valid)
+    scaled, _ = segment(in_unit_dc(albedo / k, light * k), edges, valid)
+    np.testing.assert_array_equal(plain, scaled)
+    assert len(np.unique(plain[plain >= 0])) == 2
+    merged, _ = segment(albedo / k, edges, valid)
+    assert len(np.unique(merged[merged >= 0])) == 1

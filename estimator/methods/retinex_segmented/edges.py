@@ -6,7 +6,7 @@ import numpy as np
 
 from ...light import edge_fit, sun
 from ...solvers.segmentation import assign_to_regions, segment
-from .shading import deviation, divide
+from .shading import deviation, divide, in_unit_dc
 from .values import FitContext, Hypothesis, LightSource, Shading
 
 
@@ -32,7 +32,8 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
         shading = Shading(prep.c_matrix)
         light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
-    labels, _ = segment(np.where(lit[:, None], albedo, 1.0), ctx.edges, lit, c.segment_threshold, c.uniform_spread)
+    labels, _ = segment(np.where(lit[:, None], in_unit_dc(albedo, light), 1.0), ctx.edges, lit,
+                        c.segment_threshold, c.uniform_spread)
     hypothesis = Hypothesis(radiance, light, shading, albedo, lit, labels, int(labels.max()) + 1,
                             float(np.mean(labels[lit] >= 0)), LightSource.EDGES, found)
     if hypothesis.regions and hypothesis.share >= c.retinex_min_uniform_share:
@@ -58,7 +59,7 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
         light, region_albedo = edge_fit.log_shading_fit(h.radiance, h.shading.columns, ctx.edges, ctx.usable, labels,
                                                         initial=light, **ctx.fit)
         albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
-        joined = assign_to_regions(labels, albedo, lit, ctx.edges, 2.5 * c.segment_threshold)
+        joined = assign_to_regions(labels, in_unit_dc(albedo, light), lit, ctx.edges, 2.5 * c.segment_threshold)
         labels = np.where(lit & (joined < h.regions), joined, -1)
     tied = lit & (labels >= 0)
     a, b = ctx.edges[:, 0], ctx.edges[:, 1]

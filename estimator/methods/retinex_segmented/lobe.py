@@ -10,7 +10,7 @@ from ...light import edge_fit, lobe_light, sun
 from ...model.reflection import diffuse_matrix, lobe_matrix, mirror_directions, phong_lobe
 from ...pipeline.observations import Observations
 from ...solvers.segmentation import segment
-from .shading import at_indirect_scale, deviation, divide
+from .shading import at_indirect_scale, deviation, divide, in_unit_dc
 from .values import FitContext, Hypothesis, LightSource, Shading
 
 
@@ -49,7 +49,8 @@ def lobe_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: lobe_light.LobeL
         return None
     light = at_indirect_scale(ctx, shading, radiance, light)
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
-    labels, _ = segment(np.where(lit[:, None], albedo, 1.0), ctx.edges, lit, c.segment_threshold, c.uniform_spread)
+    labels, _ = segment(np.where(lit[:, None], in_unit_dc(albedo, light), 1.0), ctx.edges, lit,
+                        c.segment_threshold, c.uniform_spread)
     share, regions = float(np.mean(labels[lit] >= 0)), int(labels.max()) + 1
     spread, source = None, LightSource.LOBE
     if regions and share >= c.retinex_min_uniform_share:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.gauge import unit_dc
 from ...light import edge_fit
 from .values import FitContext, Shading
 
@@ -19,6 +20,15 @@ def divide(shading: Shading, radiance: np.ndarray, light: np.ndarray, usable: np
     with np.errstate(divide="ignore", invalid="ignore"):
         albedo = np.where(lit[:, None], radiance / np.where(shade > 0, shade, 1.0), 0.0)
     return albedo, lit
+
+
+def in_unit_dc(albedo: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """(F, 3) ``albedo`` in the gauge of ``light`` (M', 3) with a unit DC per channel: the
+    albedos the segmentation compares. Its features are colours (chromaticity and brightness),
+    so they must not take the light's per-channel scale, which only the faint light the object
+    reflects onto itself determines (with ``interreflection``; measured on a textured sphere,
+    a red light ten times too dim joined its continents and oceans into three regions)."""
+    return albedo * unit_dc(light)[1]
 
 
 def deviation(albedo: np.ndarray, reference: np.ndarray) -> float:
