@@ -9,10 +9,13 @@ import numpy as np
 import pytest
 import trimesh
 
+from estimator import estimate
 from estimator.methods.retinex_segmented.decision import prediction_cost
 from estimator.methods.retinex_segmented.shading import at_indirect_scale, in_unit_dc
 from estimator.methods.retinex_segmented.values import Shading
 from estimator.solvers.segmentation import segment
+
+from .micro import micro_config, micro_scene
 
 FACES, VIEWS = 40, 6
 
@@ -29,9 +32,10 @@ def _problem(seed=0):
     return prep, albedo
 
 
-def _estimate(albedo, unknowns, observed=None):
+def _estimate(albedo, unknowns, observed=None, labels=None):
     return SimpleNamespace(diffuse=albedo, specular=np.zeros_like(albedo), light=np.zeros((1, 3)),
                            observed=np.ones(FACES, bool) if observed is None else observed,
+                           labels=np.arange(FACES) if labels is None else labels,
                            info={"degrees_of_freedom": {"unknowns": unknowns}})
 
 
@@ -55,6 +59,24 @@ def test_only_the_faces_every_estimate_holds_are_compared():
     held = np.arange(FACES) >= 5
     cost = prediction_cost(prep, [_estimate(albedo, 50, held), _estimate(wrong, 50)])
     np.testing.assert_allclose(cost[0], cost[1], rtol=1e-12)
+
+
+def test_an_estimate_that_interpolates_does_not_take_the_noise_for_nil():
+    """One observation per face (1 % noise): a free albedo per face reproduces every one
+    exactly. Held out, its residuals are unknown, so the scale comes from the two-region
+    estimate, which fits within the noise and wins; were the interpolating estimate's zero
+    residuals the scale, each of the regions' residuals would be priced as an outlier."""
+    rng = np.random.default_rng(2)
+    shade = rng.uniform(0.5, 1.5, (FACES, 3))
+    region = np.arange(FACES) % 2
+    albedo = np.array([[0.2, 0.5, 0.3], [0.6, 0.3, 0.1]])[region]
+    face = np.arange(FACES)
+    rgb = albedo * shade * (1 + 0.01 * rng.normal(size=(FACES, 3)))
+    prep = SimpleNamespace(obs=SimpleNamespace(face=face, rgb=rgb), shading=lambda light: shade,
+                           gloss=lambda light: np.zeros((FACES, 3)))
+    free, tied = _estimate(rgb / shade, 3 * FACES), _estimate(albedo, 6, labels=region)
+    cost = prediction_cost(prep, [free, tied])
+    assert cost[1] < cost[0]
 
 
 @pytest.mark.parametrize("scale", [[2.0, 3.0, 0.5], [1.0, 1.0, 1.0]])
@@ -113,3 +135,17 @@ def test_the_regions_found_do_not_depend_on_the_lights_colour():
     assert len(np.unique(plain[plain >= 0])) == 2
     merged, _ = segment(albedo / k, edges, valid)
     assert len(np.unique(merged[merged >= 0])) == 1
+
+
+@pytest.mark.parametrize("overrides", [{}, {"segment_threshold": 1e-6}])
+def test_the_unknowns_priced_are_the_estimates_own(overrides):
+    """The micro scene as regions (2) and, with no neighbours joined, as a texture: a diffuse
+    albedo per region and per free face, a specular per region, or one the free faces share
+    (their fits' median), and the light less its DC (the gauge), per channel."""
+    data, _ = micro_scene()
+    est = estimate(data, None, micro_config(**overrides))
+    regions = est.info["uniform_regions"]
+    free = int((est.observed & (est.labels >= regions)).sum())
+    assert (regions, free > 0) in [(2, False), (0, True)]
+    light = est.light.shape[0] - 1
+    assert est.info["degrees_of_freedom"]["unknowns"] == 3 * (regions + free + (regions or 1) + light)

@@ -53,8 +53,10 @@ def prediction_cost(prep: Prepared, estimates: list[Estimate], added: list[np.nd
     On the observations of faces every estimate holds (so that each is judged on the same
     data), the relative residuals r (:func:`observation_residuals`) are priced by the Cauchy
     negative log-likelihood sum log(1 + (r / (c s))^2), c the Cauchy constant of 95 % Gaussian
-    efficiency and s one robust scale for all (1.4826 x the median |r| of the best-fitting
-    estimate: its residuals are the closest to the noise). Each unknown (the estimate's
+    efficiency and s one robust scale for all: the least over the estimates of 1.4826 x the
+    median of their residuals as if each were held out from its own albedo's fit
+    (:func:`held_out`; a free albedo per face shrinks its faces' residuals, and to 0 where a
+    face has one observation, which would take the noise for nil). Each unknown (the estimate's
     ``degrees_of_freedom.unknowns``: albedos of its groups and the light) costs (1/2) ln n, n
     the colour values compared: the Bayesian information criterion, so a hypothesis with a
     free albedo per face wins over tied regions only when the data ask for it. No threshold
@@ -69,11 +71,21 @@ def prediction_cost(prep: Prepared, estimates: list[Estimate], added: list[np.nd
     n = 3 * int(held.sum())
     if n == 0:
         return np.zeros(len(estimates))
-    scale = min(robust_scale(r, floor=1e-12) for r in residuals)
+    scale = min(robust_scale(held_out(r, e, prep.obs.face[held]), floor=1e-12) for e, r in zip(estimates, residuals))
     nll = np.array([np.sum(np.log1p((r / (TUNING["cauchy"] * scale)) ** 2)) for r in residuals])
     unknowns = np.array([e.info["degrees_of_freedom"]["unknowns"] for e in estimates], float)
     unknowns += np.asarray(extra_unknowns or 0, float)
     return nll + 0.5 * unknowns * np.log(n)
+
+
+def held_out(residuals: np.ndarray, est: Estimate, face: np.ndarray) -> np.ndarray:
+    """(N,) the ``residuals`` of observations of ``face`` (N,) as they would be were each left
+    out of its albedo's fit: times n / (n - 1), n the observations of the face's group
+    (``est.labels``: a region, or the face alone), the leverage of one of n equally weighted
+    observations of one unknown; inf where n is 1 (the albedo interpolates it)."""
+    _, inverse, counts = np.unique(est.labels[face], return_inverse=True, return_counts=True)
+    n = counts[inverse].astype(float)
+    return np.where(n > 1, residuals * n / np.maximum(n - 1, 1), np.inf)
 
 
 def choose(prep: Prepared, hypotheses: list[Hypothesis], estimates: list[Estimate]) -> Estimate:

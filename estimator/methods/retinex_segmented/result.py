@@ -43,7 +43,10 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     specular[:] = np.median(reference, axis=0) if len(reference) else 0.0
     specular[labels >= 0] = result.specular[labels[labels >= 0]]
     observed = h.lit & np.all(np.isfinite(albedo), axis=1)
-    per_group = 2 if c.components == "both" else 1
+    free_seen = int((~(labels >= 0) & observed).sum())
+    # a diffuse albedo per region and per free face; a specular per region (the free faces
+    # take the regions' median), or one the free faces share (without regions)
+    specular_groups = (regions or int(free_seen > 0)) if c.components == "both" else 0
     fits = ctx.fits
     info = {"clusters": int(len(np.unique(group[observed]))), "uniform_regions": regions,
             "uniform_share": h.share, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
@@ -51,8 +54,7 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
             "reflection_explained": None if fits.coat_map is None else fits.coat_map.explained.tolist(),
             "lobe_explained": None if fits.lobe is None else fits.lobe[0].explained.tolist(),
             "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),
-                                   "unknowns": int(3 * (per_group * (regions + (~(labels >= 0) & observed).sum())
-                                                        + light.shape[0] - 1))}}
+                                   "unknowns": int(3 * (regions + free_seen + specular_groups + light.shape[0] - 1))}}
     zero = ~observed[:, None]
     return Estimate(np.where(zero, 0.0, albedo), np.where(zero, 0.0, specular), model.pseudo_from_light(light),
                     np.where(observed, group, -1).astype(np.int64), observed, method.name, c, info,
