@@ -58,9 +58,10 @@ def prediction_cost(prep: Prepared, estimates: list[Estimate], added: list[np.nd
     (:func:`held_out`; a free albedo per face shrinks its faces' residuals, and to 0 where a
     face has one observation, which would take the noise for nil). Each unknown (the estimate's
     ``degrees_of_freedom.unknowns``: albedos of its groups and the light) costs (1/2) ln n, n
-    the colour values compared: the Bayesian information criterion, so a hypothesis with a
-    free albedo per face wins over tied regions only when the data ask for it. No threshold
-    is fitted."""
+    the colour values compared: the Bayesian information criterion, so a hypothesis with more
+    free albedos (the lobe's texture beside tied regions) wins only when the data ask for it.
+    Whether the edges' light ties regions at all is decided before, by the region gates
+    (:func:`.edges.tied_regions`). No threshold is fitted here."""
     held = np.logical_and.reduce([e.observed for e in estimates])[prep.obs.face]
     added = added or [None] * len(estimates)
     rgb = prep.obs.rgb

@@ -26,8 +26,8 @@ def in_unit_dc(albedo: np.ndarray, light: np.ndarray) -> np.ndarray:
     """(F, 3) ``albedo`` in the gauge of ``light`` (M', 3) with a unit DC per channel: the
     albedos the segmentation compares. Its features are colours (chromaticity and brightness),
     so they must not take the light's per-channel scale, which only the faint light the object
-    reflects onto itself determines (with ``interreflection``; measured on a textured sphere,
-    a red light ten times too dim joined its continents and oceans into three regions)."""
+    reflects onto itself determines (with ``interreflection``; measured on the Earth-textured
+    blob, a red light ten times too dim joined its continents and oceans into three regions)."""
     return albedo * unit_dc(light)[1]
 
 
