@@ -32,6 +32,10 @@ class CoatConfig(Section):
     Attributes
     ----------
     coat_correction : fit and remove the coat's reflection, then find the light again.
+    coat_per_region : fit a grey coat's strength per uniform region (objects that mix matte,
+        coated and glossy parts), else one weight for the whole object (the default: on
+        objects of one rough coat, or under a sun, the smooth coat's rows misfit each region
+        differently and the per-region strengths bend the albedo ratios; docs/estimator.md).
     coat_ior : the coat's index of refraction (Fresnel reflectance and transmission).
     coat_order : highest SH degree of the light that the coat's reflection carries (at most
         ``sh_order``).
@@ -42,6 +46,7 @@ class CoatConfig(Section):
     """
 
     coat_correction: bool = True
+    coat_per_region: bool = False
     coat_ior: float = 1.5
     coat_order: int = 4
     coat_min_share: float = 0.005
@@ -67,39 +72,69 @@ def coat_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, orde
 
 
 def fit_coat(face: np.ndarray, rgb: np.ndarray, rows: np.ndarray, num_faces: int, loss: str = "cauchy",
-             rounds: int = 5) -> np.ndarray:
-    """(3,) weight k_c >= 0 of ``rows`` (N, 3) in the colours ``rgb`` (N, 3) of faces
-    ``face`` (N,): least squares on each face's deviations from its mean over views,
-    reweighted by ``loss`` (glints and shadows the coat term does not explain)."""
+             rounds: int = 5, group: np.ndarray | None = None, num_groups: int = 1) -> np.ndarray:
+    """(G, 3) weights k_gc >= 0 of ``rows`` (N, 3) in the colours ``rgb`` (N, 3) of faces
+    ``face`` (N,), one strength per group of rows ``group`` (N,) in [0, G) (None: one group,
+    G = 1) times a grey coat's per-channel factor (:func:`grey_weights`): least squares on each
+    face's deviations from its mean over views, reweighted by ``loss`` (glints and shadows the
+    coat term does not explain). Groups let each part of an object that mixes materials
+    (matte, coated, glossy) take its own coat."""
     counts = np.maximum(np.bincount(face, minlength=num_faces), 1).astype(float)
+    group = np.zeros(len(face), dtype=np.int64) if group is None else group
 
     def deviation(values):
         mean = np.stack([np.bincount(face, values[:, k], minlength=num_faces) for k in range(3)], 1) / counts[:, None]
         return values - mean[face]
 
+    def group_sum(values):
+        return np.stack([np.bincount(group, values[:, k], minlength=num_groups) for k in range(3)], 1)
+
     x, y = deviation(rows), deviation(rgb)
     weights = np.ones(len(face))
-    k = np.zeros(3)
+    strength, colour = np.zeros(num_groups), np.zeros(3)
     for _ in range(rounds):
         wx = weights[:, None] * x
-        k = np.sum(wx * y, axis=0) / np.maximum(np.sum(wx * x, axis=0), 1e-300)
-        residual = np.linalg.norm(y - k * x, axis=1)
+        strength, colour = grey_weights(group_sum(wx * y), group_sum(wx * x))
+        residual = np.linalg.norm(y - (strength[group, None] * colour) * x, axis=1)
         weights = robust.irls_weights(residual, loss, robust.robust_scale(residual, floor=1e-12))
-    return np.maximum(k, 0.0)
+    return strength[:, None] * colour
 
 
-def admissible_scale(rgb: np.ndarray, coat: np.ndarray, max_negative: float, steps: int = 20) -> float:
-    """Largest t in [0, 1] such that subtracting t x ``coat`` (N, 3) from ``rgb`` (N, 3)
-    leaves at most ``max_negative`` of the rows with a channel <= 0: a coat cannot reflect
-    more than the pixel shows (bisection)."""
+def grey_weights(xy: np.ndarray, xx: np.ndarray, rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Strengths s (G,) >= 0 and a colour w (3,) >= 0 whose weights k_gc = s_g w_c minimise
+    sum_gc (xx_gc k_gc^2 - 2 xy_gc k_gc), the least-squares normal sums ``xy``, ``xx`` (G, 3) of
+    each group and channel.
+
+    A dielectric coat reflects every wavelength alike, so its weights across channels differ
+    only by the error of the light's per-channel scale, which all groups share (w); each group
+    takes its own strength s_g (a matte part none). Alternating least squares from the pooled
+    weight; with one group s w is the per-channel least squares itself."""
+    xx = np.maximum(xx, 1e-300)
+    w = np.maximum(xy.sum(0) / xx.sum(0), 0.0)
+    s = np.zeros(len(xy))
+    for _ in range(rounds):
+        s = np.maximum((xy @ w) / np.maximum(xx @ (w * w), 1e-300), 0.0)
+        w = np.maximum((s @ xy) / np.maximum((s * s) @ xx, 1e-300), 0.0)
+    return s, w
+
+
+def admissible_scale(rgb: np.ndarray, coat: np.ndarray, max_negative: float, steps: int = 20,
+                     group: np.ndarray | None = None, num_groups: int = 1) -> np.ndarray:
+    """(G,) largest t_g in [0, 1] such that subtracting t_g x ``coat`` (N, 3) from ``rgb``
+    (N, 3) leaves at most ``max_negative`` more of group g's rows (``group`` (N,), None: one
+    group) with a channel <= 0: a coat cannot reflect more than the pixel shows (bisection,
+    all groups at once)."""
+    group = np.zeros(len(rgb), dtype=np.int64) if group is None else group
+    size = np.maximum(np.bincount(group, minlength=num_groups), 1)
+
     def negative(t):
-        return float(np.mean(np.any(rgb - t * coat <= 0, axis=1)))
+        return np.bincount(group, np.any(rgb - t[group, None] * coat <= 0, axis=1), minlength=num_groups) / size
 
-    base = negative(0.0)
-    if negative(1.0) <= base + max_negative:
-        return 1.0
-    lo, hi = 0.0, 1.0
+    allowed = negative(np.zeros(num_groups)) + max_negative
+    lo, hi = np.zeros(num_groups), np.ones(num_groups)
+    whole = negative(hi) <= allowed
     for _ in range(steps):
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if negative(mid) <= base + max_negative else (lo, mid)
-    return lo
+        ok = negative(mid) <= allowed
+        lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+    return np.where(whole, 1.0, lo)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from estimator.core import sh
-from estimator.light.coat import admissible_scale, coat_rows, fit_coat
+from estimator.light.coat import admissible_scale, coat_rows, fit_coat, grey_weights
 from estimator.model.reflection import fresnel_dielectric
 
 
@@ -41,6 +41,22 @@ def test_fit_recovers_the_weight_and_ignores_the_diffuse(true_k):
     np.testing.assert_allclose(k, true_k, atol=2e-3)
 
 
+def test_fit_gives_each_group_its_own_weight():
+    """An object that mixes a matte part (no coat) with a coated one: each part's weight is its own."""
+    rng = np.random.default_rng(3)
+    faces, views = 400, 10
+    face = np.repeat(np.arange(faces), views)
+    group = (face >= 150).astype(np.int64)                              # faces 0-149 matte, the rest coated
+    x = rng.uniform(0.0, 1.0, size=(faces * views, 3))
+    true_k = np.array([[0.0, 0.0, 0.0], [0.08, 0.05, 0.03]])
+    rgb = rng.uniform(0.05, 0.8, size=(faces, 3))[face] + true_k[group] * x
+    k = fit_coat(face, rgb, x, faces, group=group, num_groups=2)
+    assert k.shape == (2, 3)
+    np.testing.assert_allclose(k, true_k, atol=2e-3)
+    one = fit_coat(face, rgb, x, faces)                                 # one shared weight sits between the two
+    assert np.all(one[0] < true_k[1]) and np.all(one[0] > 0.01)
+
+
 def test_admissible_scale_caps_what_turns_negative():
     rgb = np.full((1000, 3), 0.1)
     coat = np.zeros((1000, 3))
@@ -49,3 +65,42 @@ def test_admissible_scale_caps_what_turns_negative():
     share = np.mean(np.any(rgb - t * coat <= 0, axis=1))
     assert share <= 0.01 and 0.49 < t < 0.51     # rows turn <= 0 where coat >= 0.1 / t: t ~ 0.505 at 1 %
     assert admissible_scale(rgb, np.full_like(rgb, 0.05), 0.0) == 1.0          # harmless: the whole weight
+
+
+def test_admissible_scale_per_group_caps_only_the_group_that_overreaches():
+    rgb = np.full((2000, 3), 0.1)
+    coat = np.zeros((2000, 3))
+    coat[:1000, 0] = np.linspace(0.0, 0.2, 1000)      # group 0 as above; group 1's coat is harmless
+    coat[1000:, 0] = 0.05
+    group = np.repeat([0, 1], 1000)
+    t = admissible_scale(rgb, coat, 0.01, group=group, num_groups=2)
+    assert t.shape == (2,) and 0.49 < t[0] < 0.51 and t[1] == 1.0
+
+
+def test_coat_groups_are_the_regions_and_one_for_every_other_face():
+    """Region labels 0..R-1 are groups; a texture's own faces (labels >= R) and unestimated
+    faces (-1) share group R; without per-region weights there is one group."""
+    from types import SimpleNamespace
+
+    from estimator.methods.retinex_segmented.method import coat_groups
+
+    est = SimpleNamespace(labels=np.array([0, 1, 1, 2, 3, 4, -1]), info={"uniform_regions": 2})
+    group, groups = coat_groups(est, per_region=True)
+    assert groups == 3
+    np.testing.assert_array_equal(group, [0, 1, 1, 2, 2, 2, 2])
+    group, groups = coat_groups(est, per_region=False)
+    assert groups == 1 and np.all(group == 0)
+
+
+def test_grey_weights_share_one_colour_across_groups():
+    """A grey coat under a light whose per-channel scale is off by c: every group's weights are
+    its strength times c, even where a group's own sums are noisy in one channel."""
+    colour = np.array([1.0, 0.8, 0.5])
+    strength = np.array([0.0, 0.3, 1.0, 2.0])
+    xx = np.array([[5.0, 5, 5], [4, 4, 4], [6, 6, 6], [0.01, 0.01, 0.01]])    # the last group is weakly seen
+    xy = xx * strength[:, None] * colour
+    xy[3, 2] *= 3.0                                                           # ...and off in blue
+    s, w = grey_weights(xy, xx)
+    k = s[:, None] * w
+    np.testing.assert_allclose(k[:3], strength[:3, None] * colour, rtol=0.03)
+    np.testing.assert_allclose(k[3] / k[3, 0], colour, rtol=0.05)            # its colour is the others'

@@ -45,6 +45,16 @@ class RegionConfig(Section):
         ]
 
 
+def coat_groups(est: Estimate, per_region: bool) -> tuple[np.ndarray, int]:
+    """(F,) the coat group of each face and the number of groups G: with ``per_region`` each
+    uniform region of ``est`` is its own group (a part of another material takes its own coat)
+    and every other face (a texture's, or unestimated) shares group R; otherwise one group."""
+    regions = int(est.info.get("uniform_regions") or 0) if per_region else 0
+    labels = est.labels
+    group = np.where((labels >= 0) & (labels < regions), labels, regions)
+    return group.astype(np.int64), regions + 1
+
+
 @register_method
 class RetinexSegmented(Method):
     """The light from albedo edges and uniform regions, in the log domain (beyond the paper).
@@ -67,10 +77,12 @@ class RetinexSegmented(Method):
        region share the regions' median, or, without regions, the median of every face's own fit).
     6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
        light's low orders (``coat_order``) is fitted to the colours' changes across views
-       (:mod:`estimator.light.coat`), scaled down until at most ``coat_max_negative`` more of the
-       observations would turn non-positive, subtracted, and steps 1-5 run again; the
-       corrected fit is kept when it predicts the colours as recorded (its coat's reflection
-       added back) at a lower :func:`.decision.prediction_cost`, the weights three more unknowns.
+       (:mod:`estimator.light.coat`), with ``coat_per_region`` a grey coat's strength per
+       uniform region (a matte part takes none; the other faces share one), scaled down until
+       at most ``coat_max_negative`` more of the observations would turn non-positive,
+       subtracted, and steps 1-5 run again; the corrected fit is kept when it predicts the
+       colours as recorded (its coat's reflection added back) at a lower
+       :func:`.decision.prediction_cost`, the weights its unknowns (three with one weight).
 
     With ``interreflection`` each face's shading also holds the light the object reflects
     onto it (:mod:`estimator.light.indirect`). Beside the edges' light, the light of the coat's
@@ -92,29 +104,35 @@ class RetinexSegmented(Method):
         t = time.perf_counter()
         fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations
         est = self._fit(prep, fits)
-        weight = np.zeros(3)
+        weight = np.zeros((1, 3))
         if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
             obs = prep.obs
             rows = coat.coat_rows(prep.data.mesh.face_normals[obs.face], obs.view_dir,
                                   est.light, c.coat_order, c.coat_ior)
-            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss)
-            weight = weight * coat.admissible_scale(obs.rgb, weight * rows, c.coat_max_negative)
-            coat_level = np.median(np.linalg.norm(weight * rows, axis=1))
+            group, groups = coat_groups(est, c.coat_per_region)
+            group = group[obs.face]
+            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, group=group, num_groups=groups)
+            weight = weight * coat.admissible_scale(obs.rgb, weight[group] * rows, c.coat_max_negative,
+                                                    group=group, num_groups=groups)[:, None]
+            reflection = weight[group] * rows
+            coat_level = np.median(np.linalg.norm(reflection, axis=1))
             if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
                 s = est.info["sun"]
                 found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
                                       c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
-                coated = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - weight * rows)), fits, found)
+                coated = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found)
                 # the same criterion, on the colours as observed: the coated fit predicts them
-                # with its coat's reflection added back, at three more unknowns (the weights)
-                costs = prediction_cost(prep, [est, coated], [None, weight * rows], [0, 3])
+                # with its coat's reflection added back, at one more unknown per region's
+                # strength and two for the grey coat's shared colour (three with one group)
+                costs = prediction_cost(prep, [est, coated], [None, reflection],
+                                        [0, len(np.unique(group)) + 2])
                 if costs[1] < costs[0]:
                     est = coated
                 else:
-                    weight = np.zeros(3)  # the coat does not pay its way: not applied
+                    weight = np.zeros_like(weight)  # the coat does not pay its way: not applied
                 est.info["coat_costs"] = costs.tolist()
             else:
-                weight = np.zeros(3)  # negligible: not applied
+                weight = np.zeros_like(weight)  # negligible: not applied
         est.info["coat_weight"] = weight.tolist()
         est.info["clustering_s"] = time.perf_counter() - t
         return est
