@@ -13,7 +13,7 @@ from .diagnostics import screening, trust
 from .methods import get_method
 from .model.estimate import Estimate
 from .model.reflection_models import reflection_model
-from .pipeline import pose
+from .pipeline import exposure, pose
 from .pipeline.prepared import prepare, with_config
 from .rays.raycast import RayCaster
 
@@ -59,6 +59,12 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
             rounds, min(config.pose_folds, len(data.views)), caster, log)
     pose_seconds = time.perf_counter() - t0
     prep = prepare(data, config, log, cls.name, cls.streams, caster)
+    gains = None
+    if config.view_gains:
+        gains = exposure.view_gains(prep.obs)
+        prep = exposure.divide_gains(prep, gains)
+        if log:
+            log(f"view gains: {gains.min():.3f} to {gains.max():.3f} over the views and channels")
     if not np.any(prep.obs.rgb > 0):
         raise InputError("every observed pixel is black or negative: there is no light to estimate from "
                          "(check the images' exposure and sign)")
@@ -76,6 +82,8 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     est.info["trust"], stats, unestimated = _screen_and_diagnose(prep, est, [v.name for v in data.views],
                                                                   cls.reports_residual)
     est.info["unestimated"] = unestimated
+    if gains is not None:
+        est.info["view_gains"] = {v.name: g.tolist() for v, g in zip(data.views, gains)}
     est.info["observations"] = int(len(prep.obs.face))
     est.info["observations_all"] = int(len(prep.all_obs.face))
     est.info["unobserved_share"] = float(1.0 - est.observed.mean())

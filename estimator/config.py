@@ -21,6 +21,7 @@ from .methods.mitsuba_ad import PeerConfig
 from .methods.retinex_segmented import RegionConfig
 from .methods.segmented import SegmentedConfig
 from .model.reflection_models import DIFFUSE_LIGHTS, SPECULAR_MODELS
+from .pipeline.exposure import ExposureConfig
 from .pipeline.pose import PoseConfig
 from .pipeline.prepared import PrepareConfig
 from .solvers.albedo_prior import AlbedoPriorConfig
@@ -32,9 +33,9 @@ __all__ = ["COMPONENTS", "DIFFUSE_LIGHTS", "LOSSES", "SECTIONS", "SPECULAR_MODEL
 
 
 @dataclass
-class EstimatorConfig(PoseConfig, PeerConfig, RegionConfig, SegmentedConfig, ClusteredConfig, IndirectConfig,
-                      LobeLightConfig, CoatMapConfig, CoatConfig, SunConfig, EdgeFitConfig, AlbedoPriorConfig,
-                      SegmentationConfig, RobustConfig, BilinearConfig, PrepareConfig):
+class EstimatorConfig(ExposureConfig, PoseConfig, PeerConfig, RegionConfig, SegmentedConfig, ClusteredConfig,
+                      IndirectConfig, LobeLightConfig, CoatMapConfig, CoatConfig, SunConfig, EdgeFitConfig,
+                      AlbedoPriorConfig, SegmentationConfig, RobustConfig, BilinearConfig, PrepareConfig):
     """Every setting of the estimator (defaults follow the paper where it gives one); the
     sections document them. Refused with :class:`~estimator.core.errors.InputError` naming
     the setting when a value has the wrong type or lies outside its range."""

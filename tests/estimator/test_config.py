@@ -26,6 +26,7 @@ WIRE_NAMES = (
     "tie_regions", "relabel_rounds", "relabel_free_ratio", "retinex_min_uniform_share",
     "region_max_deviation", "region_max_drift", "ad_time_budget", "ad_max_steps", "ad_resolution", "ad_spp",
     "ad_learning_rate", "ad_envmap_height", "ad_specular", "pose_rounds", "pose_folds", "auto_pose",
+    "view_gains",
 )
 
 
