@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.estimate import Estimate
+from ..pipeline.exposure import view_gains
 from ..pipeline.prepared import Prepared
 from ..solvers.robust import relative_residuals, robust_scale
 
@@ -83,7 +84,8 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     Returns
     -------
     summary : JSON-ready dict: ``views`` (per view: observations, relative residual
-        (median), outlier share, gross-error share), ``residual`` (median relative residual, robust scale),
+        (median), outlier share, gross-error share, exposure relative to the views'
+        (:func:`estimator.pipeline.exposure.view_gains`, geometric mean over channels)), ``residual`` (median relative residual, robust scale),
         ``light_condition``, ``albedo_relative_se`` (quantiles over estimated faces),
         ``outlier_share``.
     faces : per-face arrays: ``observations`` (F,) kept rows, ``albedo_se`` (F, 3)
@@ -96,12 +98,16 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     scale, outlier = _outliers(relative, estimated)
     views = []
     view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
+    # each view's exposure relative to the others (geometric mean over channels), a figure: a
+    # glossy object's view-dependent reflection moves it too (estimator.pipeline.exposure)
+    exposure = np.exp(np.log(view_gains(obs)).mean(axis=1)) if obs.view is not None else np.ones(obs.num_views)
     for v in range(obs.num_views):
         sel = (view == v) & estimated
         views.append({"view": view_names[v] if v < len(view_names) else str(v), "observations": int(sel.sum()),
                       "residual": float(np.median(relative[sel])) if sel.any() else None,
                       "outlier_share": float(outlier[sel].mean()) if sel.any() else None,
-                      "gross_share": float(np.mean(relative[sel] > GROSS_RESIDUAL)) if sel.any() else None})
+                      "gross_share": float(np.mean(relative[sel] > GROSS_RESIDUAL)) if sel.any() else None,
+                      "exposure": float(exposure[v])})
     _add_neighbour_shares(views, prep)
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -187,9 +193,11 @@ def warnings_for(est: Estimate) -> list[str]:
                                       OUTLIER_VIEW_FACTOR * (v.get("neighbour_gross_share") or 0.0))
            and v["gross_share"] * v["observations"] >= OUTLIER_VIEW_ROWS]
     for v in bad:
+        exposure = f"; its exposure is {v['exposure']:.2f}x the views' (view_gains divides out auto-exposure)" \
+            if v.get("exposure") is not None else ""
         out.append(f"outlier view {v['view']}: {100 * v['gross_share']:.1f} % of its observations are off by over "
                    f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level (typical view {100 * typical:.1f} %): glare, "
-                   "an occluder or a wrong pose? (pose refinement, pose_rounds, corrects poses)")
+                   f"an occluder or a wrong pose? (pose refinement, pose_rounds, corrects poses){exposure}")
     median = trust["residual"]["median_relative"]
     if median is not None and median > HIGH_RESIDUAL:
         out.append(f"high residual: the estimate re-predicts its observations with a median relative error of "

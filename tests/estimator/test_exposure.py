@@ -87,3 +87,17 @@ def test_with_view_gains_the_estimate_does_not_depend_on_the_views_exposures():
     o = clean.observed & jitter.observed
     scale = (jitter.diffuse[o] * clean.diffuse[o]).sum(0) / (jitter.diffuse[o] ** 2).sum(0)   # the common gain
     np.testing.assert_allclose(jitter.diffuse[o] * scale, clean.diffuse[o], rtol=1e-3, atol=1e-6)
+
+
+def test_the_trust_summary_gives_each_views_exposure_relative_to_the_others():
+    """Without view_gains the diagnostics still report each view's exposure (the two-way fit):
+    on views re-exposed by GAINS the figures are the clean ones times each view's gain (its
+    geometric mean over channels, relative to the views')."""
+    data, _ = micro_scene()
+    jittered = MultiViewData(data.mesh, [View(v.name, v.camera, v.rgb * g, v.alpha) for v, g in zip(data.views, GAINS)])
+    clean = estimate(data, "bilinear-clustered", micro_config())
+    jitter = estimate(jittered, "bilinear-clustered", micro_config())
+    ratio = np.array([j["exposure"] / c["exposure"] for j, c in zip(jitter.info["trust"]["views"],
+                                                                    clean.info["trust"]["views"])])
+    level = np.exp(np.log(GAINS).mean(axis=1))
+    np.testing.assert_allclose(ratio, level / np.exp(np.log(level).mean()), rtol=1e-4)

@@ -98,8 +98,8 @@ def _with_trust(trust, **info):
 
 def _trust(median=0.01, condition=10.0, shares=(0.0, 0.0, 0.0, 0.0)):
     return {"residual": {"median_relative": median, "robust_scale": median}, "light_condition": condition,
-            "views": [{"view": f"v{i}", "observations": 100, "outlier_share": s, "gross_share": s}
-                      for i, s in enumerate(shares)]}
+            "views": [{"view": f"v{i}", "observations": 100, "outlier_share": s, "gross_share": s,
+                       "exposure": 1.0 + s} for i, s in enumerate(shares)]}
 
 
 @pytest.mark.parametrize("trust, info, needle", [
@@ -107,6 +107,7 @@ def _trust(median=0.01, condition=10.0, shares=(0.0, 0.0, 0.0, 0.0)):
     (_trust(condition=1e9), {}, "ill-conditioned"),
     (_trust(condition=None), {}, "condition number infinite"),
     (_trust(shares=(0.0, 0.3, 0.0, 0.0)), {}, "outlier view v1"),
+    (_trust(shares=(0.0, 0.3, 0.0, 0.0)), {}, "its exposure is 1.30x the views' (view_gains"),
     (_trust(), {"faces_without_kept_views": 0.5}, "50 % of the faces have no observation"),
     (_trust(), {"degrees_of_freedom": {"observations": 10, "unknowns": 12}}, "underdetermined"),
 ])
