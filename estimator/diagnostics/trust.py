@@ -85,7 +85,8 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     -------
     summary : JSON-ready dict: ``views`` (per view: observations, relative residual
         (median), outlier share, gross-error share, exposure relative to the views'
-        (:func:`estimator.pipeline.exposure.view_gains`, geometric mean over channels)), ``residual`` (median relative residual, robust scale),
+        (:func:`estimator.pipeline.exposure.view_gains`, geometric mean over channels)),
+        ``residual`` (median relative residual, robust scale),
         ``light_condition``, ``albedo_relative_se`` (quantiles over estimated faces),
         ``outlier_share``.
     faces : per-face arrays: ``observations`` (F,) kept rows, ``albedo_se`` (F, 3)
