@@ -149,3 +149,12 @@ def test_the_unknowns_priced_are_the_estimates_own(overrides):
     assert (regions, free > 0) in [(2, False), (0, True)]
     light = est.light.shape[0] - 1
     assert est.info["degrees_of_freedom"]["unknowns"] == 3 * (regions + free + (regions or 1) + light)
+
+
+def test_the_default_reports_its_stages_as_it_goes():
+    """Progress lines of the solve: the light's source when the first fit is done."""
+    data, _ = micro_scene()
+    lines = []
+    estimate(data, None, micro_config(), log=lines.append)
+    stages = [line.split(" ")[0] for line in lines]
+    assert "light" in stages and stages.index("observations:") < stages.index("light")

@@ -104,6 +104,8 @@ class RetinexSegmented(Method):
         t = time.perf_counter()
         fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations
         est = self._fit(prep, fits)
+        self.log(f"light from {est.info['light_from']} ({est.info['uniform_regions']} uniform regions), "
+                 f"{time.perf_counter() - t:.1f} s")
         weight = np.zeros((1, 3))
         if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
             obs = prep.obs
@@ -130,6 +132,8 @@ class RetinexSegmented(Method):
                     est = coated
                 else:
                     weight = np.zeros_like(weight)  # the coat does not pay its way: not applied
+                self.log(f"coat's reflection {'removed' if costs[1] < costs[0] else 'not removed'} (cost "
+                         f"{costs[1]:.4g} against {costs[0]:.4g} without), {time.perf_counter() - t:.1f} s")
                 est.info["coat_costs"] = costs.tolist()
             else:
                 weight = np.zeros_like(weight)  # negligible: not applied
