@@ -53,6 +53,8 @@ def view_gains(obs: Observations) -> np.ndarray:
     gains), with a geometric mean of 1 over the views; 1 for a view with no such observation."""
     usable = np.all(obs.rgb > 0, axis=1)
     usable &= np.bincount(obs.face[usable], minlength=obs.num_faces)[obs.face] >= 2
+    if not usable.any():   # no face seen twice: nothing relates the views
+        return np.ones((obs.num_views, 3))
     face, view, values = obs.face[usable], obs.view[usable], np.log(obs.rgb[usable])
     gains = np.zeros((obs.num_views, 3))
     for c in range(3):

@@ -67,6 +67,8 @@ def test_view_gains_are_the_view_effects_of_the_faces_log_colours():
     np.testing.assert_allclose(view_gains(obs), gains, rtol=0.02)
     same = Observations(face, rgb / gains[view], np.zeros((face.size, 3)), faces, views, view=view)
     np.testing.assert_allclose(view_gains(same), 1.0, atol=0.02)
+    single = Observations(np.arange(30), rgb[:30], np.zeros((30, 3)), 30, views, view=view[:30])
+    np.testing.assert_array_equal(view_gains(single), 1.0)                # no face seen twice: nothing to say
 
 
 def test_with_view_gains_the_estimate_does_not_depend_on_the_views_exposures():
