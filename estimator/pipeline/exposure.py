@@ -50,42 +50,51 @@ class ExposureConfig(Section):
 def view_gains(obs: Observations) -> np.ndarray:
     """(V, 3) each view's gain per channel: the view effects of the two-way fit of the log
     colours of faces seen from at least two views (a face seen once says nothing of the
-    gains), with a geometric mean of 1 over the views; 1 for a view with no such observation."""
+    gains), with a geometric mean of 1 over the views; 1 for a view with no such observation.
+    One robust weight per row (its residual's norm over the channels, as elsewhere), so the
+    three channels share each round's system."""
     usable = np.all(obs.rgb > 0, axis=1)
     usable &= np.bincount(obs.face[usable], minlength=obs.num_faces)[obs.face] >= 2
     if not usable.any():   # no face seen twice: nothing relates the views
         return np.ones((obs.num_views, 3))
     face, view, values = obs.face[usable], obs.view[usable], np.log(obs.rgb[usable])
+    # the (face, view) pairs as a CSR pattern built once; each round only refills its weights
+    pair, inverse = np.unique(face * obs.num_views + view, return_inverse=True)
+    pattern = sparse.csr_matrix((np.ones(len(pair)), pair % obs.num_views,
+                                 np.concatenate([[0], np.cumsum(np.bincount(pair // obs.num_views,
+                                                                            minlength=obs.num_faces))])),
+                                shape=(obs.num_faces, obs.num_views))
+    weights = np.ones(len(face))
     gains = np.zeros((obs.num_views, 3))
-    for c in range(3):
-        weights = np.ones(len(face))
-        for _ in range(ROBUST_ROUNDS):
-            gains[:, c] = _view_effects(face, view, values[:, c], weights, obs.num_faces, obs.num_views)
-            level = np.bincount(face, weights * (values[:, c] - gains[view, c]), minlength=obs.num_faces) / \
-                np.maximum(np.bincount(face, weights, minlength=obs.num_faces), 1e-300)
-            residual = np.abs(values[:, c] - gains[view, c] - level[face])
-            weights = robust.irls_weights(residual, "cauchy", robust.robust_scale(residual, floor=1e-9))
+    for _ in range(ROBUST_ROUNDS):
+        gains, level = _two_way_fit(pattern, inverse, face, view, values, weights)
+        residual = np.linalg.norm(values - gains[view] - level[face], axis=1)
+        weights = robust.irls_weights(residual, "cauchy", robust.robust_scale(residual, floor=1e-9))
     return np.exp(gains)
 
 
-def _view_effects(face, view, y, w, num_faces, num_views) -> np.ndarray:
-    """(V,) view effects g of the weighted least-squares fit y ~ level[face] + g[view] (rows
-    (N,), weights w (N,)), the face levels eliminated (each face's weighted mean): the
-    V x V reduced system D - B^T W^-1 B, B[f, v] the weight of face f's rows in view v.
-    Centred over the views that have rows (the gauge); 0 for the others."""
-    b = sparse.csr_matrix((w, (face, view)), shape=(num_faces, num_views))
-    by = np.bincount(face, w * y, minlength=num_faces)
-    total = np.maximum(np.asarray(b.sum(axis=1)).ravel(), 1e-300)
+def _two_way_fit(pattern, inverse, face, view, y, w) -> tuple[np.ndarray, np.ndarray]:
+    """View effects g (V, 3) and face levels (F, 3) of the weighted least-squares fit
+    y ~ level[face] + g[view] (rows y (N, 3), weights w (N,)). The levels are eliminated (each
+    face's weighted mean), leaving the V x V system D - B^T T^-1 B, B[f, v] the weight of face
+    f's rows in view v (``pattern`` refilled through ``inverse``, each row's pair), T its row
+    sums. g is centred over the views that have rows (the gauge); 0 for the others."""
+    num_faces, num_views = pattern.shape
+    b = pattern.copy()
+    b.data = np.bincount(inverse, w, minlength=b.nnz)
+    total = np.maximum(np.bincount(face, w, minlength=num_faces), 1e-300)
+    by = np.stack([np.bincount(face, w * y[:, c], minlength=num_faces) for c in range(3)], 1)
+    vy = np.stack([np.bincount(view, w * y[:, c], minlength=num_views) for c in range(3)], 1)
     scaled = sparse.diags(1.0 / total) @ b
-    system = sparse.diags(np.asarray(b.sum(axis=0)).ravel()) - (b.T @ scaled)
-    rhs = np.bincount(view, w * y, minlength=num_views) - scaled.T @ by
+    system = (sparse.diags(np.asarray(b.sum(axis=0)).ravel()) - b.T @ scaled).toarray()
+    rhs = vy - scaled.T @ by
     seen = np.bincount(view, minlength=num_views) > 0
-    dense = system.toarray()[np.ix_(seen, seen)]
     # the system is singular along the common gain (all ones): the gauge row fixes its mean
-    g = np.linalg.lstsq(np.vstack([dense, np.ones(seen.sum())]), np.append(rhs[seen], 0.0), rcond=None)[0]
-    out = np.zeros(num_views)
-    out[seen] = g - g.mean()
-    return out
+    g = np.linalg.lstsq(np.vstack([system[np.ix_(seen, seen)], np.ones(seen.sum())]),
+                        np.vstack([rhs[seen], np.zeros((1, 3))]), rcond=None)[0]
+    gains = np.zeros((num_views, 3))
+    gains[seen] = g - g.mean(axis=0)
+    return gains, (by - b @ gains) / total[:, None]
 
 
 def divide_gains(prep: Prepared, gains: np.ndarray) -> Prepared:
