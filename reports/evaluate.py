@@ -7,7 +7,7 @@ import numpy as np
 
 from estimator import Estimate, TriangleMesh, sh
 
-from . import metrics
+from . import metrics, protocols
 from .ground_truth import (
     GroundTruth,
     evaluation_mask,
@@ -28,7 +28,8 @@ class ImageSet:
     pixels to compare (object pixels); names : one per image. ``align``: scale the
     predictions per channel onto the references first (False for the cross-check,
     where the absolute scale must agree). ``noise``: per image, the predictions' own relative
-    Monte Carlo noise (a render's), or None.
+    Monte Carlo noise (a render's), or None. ``protocols``: the published benchmarks' metric
+    sets to add (:mod:`reports.protocols`), under ``"protocols"``.
     """
 
     names: list[str]
@@ -38,6 +39,7 @@ class ImageSet:
     align: bool = True
     note: str = ""
     noise: list[float] | None = None
+    protocols: tuple[str, ...] = ()
 
     def metrics(self) -> dict:
         per_view = [metrics.image_metrics(p, r, m, self.align)
@@ -50,6 +52,9 @@ class ImageSet:
             # the render's noise adds in quadrature to the disagreement of the two models
             view["render_noise"] = noise
             view["relative_l2_noise_free"] = float(np.sqrt(max(view["relative_l2"] ** 2 - noise ** 2, 0.0)))
+        if self.protocols and per_view:
+            out["protocols"] = protocols.score(self.names, self.predictions, self.references, self.masks,
+                                               self.protocols)
         if self.note:
             out["note"] = self.note
         return out

@@ -109,6 +109,10 @@ def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regression
         cls = "bad" if worse else "ok"
         parts.append(f"<h2>Regression against baseline</h2><p class='{cls}'>"
                      f"{len(worse)} of {len(regressions)} tracked metrics worse</p>" + regression_table(regressions))
+    for key, label in (("novel_views", "Novel views"), ("relighting", "Relighting")):
+        table = protocol_table((metrics.get(key) or {}).get("protocols") or {})
+        if table:
+            parts.append(f"<h2>{label}: published benchmarks' protocols</h2>{table}")
     section = None
     for sec, caption, png in figures:
         if sec != section:
@@ -117,6 +121,25 @@ def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regression
         parts.append(f"<figure>{embed_png(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
     parts.append("<h2>All metrics</h2><pre>" + html.escape(json.dumps(metrics, indent=1)) + "</pre></body></html>")
     return "\n".join(parts)
+
+
+def protocol_table(block: dict) -> str:
+    """The protocols of one image set (:func:`reports.protocols.score`'s output) as one table:
+    a row per protocol with its alignment and each metric's mean over the views (arrow: the
+    better direction); a metric that could not be computed says why. '' when empty."""
+    if not block:
+        return ""
+    out = ["<table><tr><th>protocol</th><th>alignment</th><th>metrics (mean over views)</th></tr>"]
+    for name, entry in block.items():
+        cells = []
+        for key, higher in entry.get("higher_is_better", {}).items():
+            value = entry.get(key)
+            shown = "unavailable" if value is None else f"{value:.4g}"
+            cells.append(f"{html.escape(key)} {'↑' if higher else '↓'} {shown}")
+        notes = "".join(f"<br><small>{html.escape(r)}</small>" for r in entry.get("unavailable", []))
+        out.append(f"<tr><td>{html.escape(name)}</td><td>{html.escape(entry.get('alignment', ''))}</td>"
+                   f"<td>{' · '.join(cells)}{notes}</td></tr>")
+    return "\n".join(out + ["</table>"])
 
 
 def regression_table(rows: list[dict]) -> str:

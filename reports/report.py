@@ -55,9 +55,11 @@ def view_names(views: list[View]) -> list[str]:
     return [os.path.splitext(os.path.basename(v.name))[0] for v in views]
 
 
-def novel_views(predictor: Predictor, views: list[View], note: str = "") -> tuple[ImageSet, float, list]:
+def novel_views(predictor: Predictor, views: list[View], note: str = "",
+                protocols: tuple[str, ...] = ()) -> tuple[ImageSet, float, list]:
     """The estimate's images of ``views`` against their recorded images, on the object pixels
-    (alpha at least the estimator's ``min_coverage``) whose face the estimate covers.
+    (alpha at least the estimator's ``min_coverage``) whose face the estimate covers, scored
+    also by the named ``protocols`` (:mod:`reports.protocols`).
 
     Returns (the image set, the mean share of object pixels left unestimated, per view the
     (H, W) bool pixels of estimated faces)."""
@@ -68,12 +70,12 @@ def novel_views(predictor: Predictor, views: list[View], note: str = "") -> tupl
     obj = [(v.alpha if v.alpha is not None else np.ones(v.rgb.shape[:2])) >= est.config.min_coverage for v in views]
     unestimated = float(np.mean([1 - (o & e).sum() / max(o.sum(), 1) for o, e in zip(obj, estimated)]))
     images = ImageSet(view_names(views), preds, [v.rgb for v in views], [m & e for m, e in zip(obj, estimated)],
-                      note=note)
+                      note=note, protocols=protocols)
     return images, unestimated, estimated
 
 
 def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], renders: Renders,
-             header: dict, view_note: str = "") -> ReportContent:
+             header: dict, view_note: str = "", protocols: tuple[str, ...] = ()) -> ReportContent:
     """Compare an estimate (through its ``predictor``) with the ground truth.
 
     Images are compared on the object pixels whose face the estimate covers
@@ -86,14 +88,14 @@ def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], render
     min_coverage = est.config.min_coverage
     cams = [v.camera for v in views]
     names = view_names(views)
-    novel, unestimated, estimated = novel_views(predictor, views, view_note)
+    novel, unestimated, estimated = novel_views(predictor, views, view_note, protocols)
     preds = novel.predictions
 
     axis, degrees = renders.rotation
     rot = axis_angle_matrix(axis, float(degrees))
     relit = ImageSet(names, [predictor.predict(c, rot)[0] for c in cams], [t[..., :3] for t in renders.relit],
                      [(t[..., 3] >= min_coverage) & e for t, e in zip(renders.relit, estimated)],
-                     note=f"light turned {degrees} deg about {axis}")
+                     note=f"light turned {degrees} deg about {axis}", protocols=protocols)
     cross = None
     if renders.estimate is not None:
         pure = predictor.caster.face_id_buffers(cams, pure=True)

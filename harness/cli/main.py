@@ -22,8 +22,10 @@ from estimator import VARIANTS, InputError, StopRequested, clear_stop, request_s
 from harness.io.atomic import OutputError, check_output, refuse_inputs
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
+from reports.protocols import PROTOCOLS
 
 DEFAULT_SCENE = "earth-specular"
+PROTOCOL_NAMES = tuple(PROTOCOLS)
 
 
 class Terminated(BaseException):
@@ -211,7 +213,8 @@ def cmd_report(args) -> int:
     baseline = _load_baseline(args.baseline)
     metrics, regressions = build_report(args.run, args.output, dataset, rotation, args.cross_check_spp,
                                         not args.no_mitsuba, baseline, args.overwrite, log=_err,
-                                        check_fingerprint=not args.no_fingerprint_check)
+                                        check_fingerprint=not args.no_fingerprint_check,
+                                        protocols=tuple(dict.fromkeys(args.protocol or PROTOCOL_NAMES)))
     if args.write_baseline:
         from reports.regression import make_baseline
 
@@ -724,6 +727,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="spp of the Mitsuba re-render (default 64; 512 for --specular-model lobe; at most "
                          f"{MAX_CROSS_CHECK_SPP}, the scene specs' bound)")
     rp.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba re-render cross-check")
+    rp.add_argument("--protocol", action="append", choices=PROTOCOL_NAMES,
+                    help="a published benchmark's metric set for the novel views and relighting (repeatable; "
+                         f"default: all of {', '.join(PROTOCOL_NAMES)}); see docs/reports.md")
     rp.add_argument("--overwrite", action="store_true")
     rp.add_argument("--no-fingerprint-check", action="store_true",
                     help="read a run against a dataset its fingerprint does not name (or a run without one)")

@@ -17,6 +17,7 @@ from harness.io.runs import RunError, read_run, versions
 from harness.scene.export import export_scene, render_estimate
 from harness.scene.relight import render_truth
 from reports.html import compare_page, report_page
+from reports.protocols import PROTOCOLS
 from reports.regression import check
 from reports.report import (
     COMPARE_COLUMNS,
@@ -68,8 +69,12 @@ def _size(size: dict) -> str:
 
 def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rotation=("y", 90.0),
                  cross_check_spp: int | None = None, mitsuba: bool = True, baseline: dict | None = None,
-                 overwrite: bool = False, log=print, check_fingerprint: bool = True) -> tuple[dict, list[dict] | None]:
+                 overwrite: bool = False, log=print, check_fingerprint: bool = True,
+                 protocols: tuple[str, ...] = tuple(PROTOCOLS)) -> tuple[dict, list[dict] | None]:
     """Evaluate a run against its dataset's ground truth and write the report folder.
+
+    ``protocols``: the published benchmarks' metric sets to add to the novel-view and
+    relighting figures (:mod:`reports.protocols`; all by default).
 
     ``cross_check_spp`` defaults to 64 (512 for a radiance model, whose Phong-lobe
     render of the radiance environment is noisier).
@@ -91,7 +96,7 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
         novel = None
         if ds.data.test_views:   # a real capture's held-out frames are scored without any truth
             images, unestimated, _ = novel_views(predictor, ds.data.test_views,
-                                                 "the dataset's test frames (no ground truth)")
+                                                 "the dataset's test frames (no ground truth)", protocols)
             novel = {**images.metrics(), "unestimated_pixel_share": unestimated}
         log(f"{ds.path} has no ground_truth/: writing the self-check report"
             + (f" and scoring its {len(ds.data.test_views)} test frame(s)" if novel else " only (no test frames)"))
@@ -115,7 +120,7 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
         except NoMitsubaEquivalent as exc:
             renders.estimate_note = f"skipped: {exc}"
 
-    content = assemble(predictor, ds.ground_truth, views, renders, header, view_note)
+    content = assemble(predictor, ds.ground_truth, views, renders, header, view_note, protocols)
     m = content.metrics
     m["self_check"] = check_metrics
     regressions = None

@@ -29,6 +29,11 @@ def test_report_contents(tiny_report):
     assert m["illumination"]["relative_l2"] < 0.05
     assert m["novel_views"]["views"] == 2 and m["novel_views"]["psnr_srgb"] > 25
     assert m["relighting"]["psnr_srgb"] > 20
+    for key in ("novel_views", "relighting"):   # the published protocols, all by default
+        block = m[key]["protocols"]
+        assert list(block) == ["stanford-orb", "nerfactor", "tensoir", "raw"]
+        assert block["stanford-orb"]["psnr_l"] > 20 and 0 < block["raw"]["flip_hdr"] < 1
+        assert len(block["nerfactor"]["per_view"]) == m[key]["views"]
     cc = m["mitsuba_cross_check"]
     assert cc["pass"] and cc["compared"] == "relative_l2_noise_free"
     assert all(0 < v["render_noise"] and v["relative_l2_noise_free"] <= v["relative_l2"] < cc["tolerance"] + 0.05
@@ -56,10 +61,12 @@ def test_baseline_regression_exit_codes(tiny_report, capsys):
     worse["metrics"].pop("mitsuba_cross_check.relative_l2", None)
     json.dump(worse, open(tiny_report / "worse.json", "w"))
     capsys.readouterr()
-    assert main(["report", str(run), "-o", str(tiny_report / "third"), "--no-mitsuba",
+    assert main(["report", str(run), "-o", str(tiny_report / "third"), "--no-mitsuba", "--protocol", "raw",
                  "--baseline", str(tiny_report / "worse.json")]) == 1
     err = capsys.readouterr().err
     assert "REGRESSION albedo.specular.dc.luminance.within_10" in err
+    third = json.load(open(tiny_report / "third" / "metrics.json"))
+    assert list(third["novel_views"]["protocols"]) == ["raw"]
 
 
 def test_compare_two_reports(tiny_report, tiny_earth):
