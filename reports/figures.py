@@ -33,14 +33,36 @@ def _show(ax, image, title):
     ax.set_yticks([])
 
 
+def _latlong_axes(ax, width: int, height: int) -> None:
+    """Axes of a lat-long map in Mitsuba's envmap orientation: u across (0.5 faces +Z),
+    elevation from +90 degrees (+Y, top row) to -90."""
+    ax.set_xticks(np.linspace(-0.5, width - 0.5, 5), ["0", "0.25", "0.5 (+Z)", "0.75", "1"], fontsize=7)
+    ax.set_yticks(np.linspace(-0.5, height - 0.5, 5), ["90", "45", "0", "-45", "-90"], fontsize=7)
+    ax.set_xlabel("u (azimuth)", fontsize=8)
+    ax.set_ylabel("elevation (deg)", fontsize=8)
+
+
+def _tone_bar(fig, ax, exposure: float, label: str) -> None:   # ax: one axes or a list sharing the bar
+    """A colour bar of the report's tone map for grey values: linear values 0 .. ``exposure``
+    through the sRGB curve (white = ``exposure``), labelled with their units."""
+    from matplotlib.colors import ListedColormap, Normalize
+
+    grey = tonemap(np.linspace(0, 1, 256), 1.0)
+    bar = plt.cm.ScalarMappable(Normalize(0, exposure), ListedColormap(np.repeat(grey[:, None], 3, axis=1)))
+    fig.colorbar(bar, ax=ax, shrink=0.85, label=label)
+
+
 def illumination(estimate_sh: np.ndarray, truth_sh: np.ndarray, size=(128, 256)) -> bytes:
     """Estimated vs filtered true pseudo illumination as lat-long maps (Mitsuba envmap
     orientation, shared exposure), and their energy per SH band (the paper's Fig. 5 a, b)."""
     est, tru = sh.to_latlong(estimate_sh, *size), sh.to_latlong(truth_sh, *size)
     exposure = float(np.percentile(np.maximum(tru, 0), 99.5))
-    fig, axes = plt.subplots(1, 3, figsize=(13, 2.9), gridspec_kw={"width_ratios": [2, 2, 1.3]})
+    fig, axes = plt.subplots(1, 3, figsize=(14, 3.1), gridspec_kw={"width_ratios": [2, 2, 1.3]}, layout="constrained")
     _show(axes[0], tonemap(tru, exposure), "ground truth, Phong-filtered (unit DC)")
     _show(axes[1], tonemap(est, exposure), "estimated pseudo illumination")
+    for ax in axes[:2]:
+        _latlong_axes(ax, size[1], size[0])
+    _tone_bar(fig, list(axes[:2]), exposure, "radiance (unit-DC gauge)")
     order = sh.order_of(estimate_sh.shape[0])
     band = sh.degrees(order)
     for coeffs, label in ((truth_sh, "truth"), (estimate_sh, "estimate")):
@@ -48,6 +70,7 @@ def illumination(estimate_sh: np.ndarray, truth_sh: np.ndarray, size=(128, 256))
             range(order + 1), [np.sum(coeffs[band == l] ** 2) for l in range(order + 1)], "o-", label=label
         )
     axes[2].set_xlabel("SH band l")
+    axes[2].set_ylabel("sum of squared coefficients")
     axes[2].set_title("energy per band", fontsize=9)
     axes[2].legend(fontsize=8)
     return _png(fig)
@@ -65,6 +88,7 @@ def ratio_histograms(ratios: dict[str, np.ndarray]) -> bytes:
             ax.axvline(x, color="k", lw=0.8, ls=style)
         ax.set_title(f"{comp}: estimated / true ({len(r)} faces)", fontsize=9)
         ax.set_xlabel("ratio (luminance, unit-DC gauge; clipped to [0, 2])")
+        ax.set_ylabel("faces")
     if not comps:
         axes[0][0].text(0.5, 0.5, "no albedo to compare", ha="center")
     return _png(fig)
@@ -83,7 +107,7 @@ def texture_maps(caster: RayCaster, estimate: dict[str, np.ndarray], truth: dict
     """Estimated (scaled per channel by least squares) vs true per-face albedo as lat-long maps."""
     ids = face_latlong(caster)
     comps = list(estimate)
-    fig, axes = plt.subplots(len(comps), 2, figsize=(10, 2.6 * len(comps)), squeeze=False)
+    fig, axes = plt.subplots(len(comps), 2, figsize=(11, 2.8 * len(comps)), squeeze=False, layout="constrained")
     for row, comp in zip(axes, comps):
         e, t = estimate[comp], truth[comp]
         s = lstsq_scale(e, t)
@@ -91,6 +115,8 @@ def texture_maps(caster: RayCaster, estimate: dict[str, np.ndarray], truth: dict
         for ax, values, title in ((row[0], t, f"true {comp} albedo"), (row[1], e * s, f"estimated {comp} (scaled)")):
             img = np.where(ids[..., None] >= 0, values[np.maximum(ids, 0)], 0.0)
             _show(ax, tonemap(img, top), title)
+            _latlong_axes(ax, ids.shape[1], ids.shape[0])
+        _tone_bar(fig, list(row), top, "albedo (linear; white = 99.5th pct of the truth)")
     return _png(fig)
 
 
@@ -117,15 +143,17 @@ def clusters(caster: RayCaster, cameras: list[Camera], labels: np.ndarray, regio
 def image_comparison(names, predictions, references, masks, title: str) -> bytes:
     """Reference | prediction | difference, tone mapped with the reference's exposure."""
     n = len(names)
-    fig, axes = plt.subplots(n, 3, figsize=(8.4, 2.8 * n), squeeze=False)
+    fig, axes = plt.subplots(n, 3, figsize=(11, 2.8 * n), squeeze=False, layout="constrained")
     for row, name, p, r, m in zip(axes, names, predictions, references, masks):
         exposure = max(float(np.percentile(r[m], 99)) if m.any() else 1.0, 1e-30)
         s = lstsq_scale(p[m], r[m]) if m.any() else np.ones(3)
         _show(row[0], tonemap(r, exposure), f"{name}: reference")
         _show(row[1], tonemap(p * s, exposure), f"{title}")
+        _tone_bar(fig, list(row[:2]), exposure, "radiance (scene units)")
         diff = np.abs(p * s - r) @ LUMINANCE / exposure
-        row[2].imshow(np.where(m, diff, 0), cmap="magma", vmin=0, vmax=0.25)
-        row[2].set_title("|difference| / exposure (0..0.25)", fontsize=9)
+        im = row[2].imshow(np.where(m, diff, 0), cmap="magma", vmin=0, vmax=0.25)
+        fig.colorbar(im, ax=row[2], shrink=0.85, label="|difference| / exposure (luminance)")
+        row[2].set_title("difference (compared pixels)", fontsize=9)
         row[2].set_xticks([])
         row[2].set_yticks([])
     return _png(fig)
@@ -140,6 +168,7 @@ def compare_histograms(entries: list[tuple[str, np.ndarray]], component: str) ->
     ax.axvline(1.0, color="k", lw=0.8)
     ax.set_title(f"{component} albedo: estimated / true (unit-DC gauge)", fontsize=9)
     ax.set_xlabel("ratio (clipped to [0, 2])")
+    ax.set_ylabel("density (faces per unit ratio)")
     ax.legend(fontsize=7)
     return _png(fig)
 
@@ -168,11 +197,13 @@ def error_against_time(runs: list[dict]) -> bytes:
     return _png(fig)
 
 
-def sweep_panels(axis: str, panels: list[tuple[str, dict]]) -> bytes:
-    """One row of plots, a metric each: (metric label, label -> (x, mean, min, max)); a line
-    per label with its min-max band. Non-numeric axis values are placed in order."""
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.2), squeeze=False)
-    for ax, (metric, series) in zip(axes[0], panels):
+def sweep_panels(axis: str, panels: list[tuple[str, dict]], columns: int = 4) -> bytes:
+    """Plots in rows of ``columns``, a metric each: (metric label, label -> (x, mean, min,
+    max)); a line per label with its min-max band. Non-numeric axis values are placed in order."""
+    rows = -(-len(panels) // columns)
+    fig, axes = plt.subplots(rows, min(columns, len(panels)), figsize=(4.0 * min(columns, len(panels)), 3.1 * rows),
+                             squeeze=False, layout="constrained")
+    for ax, (metric, series) in zip(axes.flat, panels):
         for label, (xs, mean, lo, hi) in series.items():
             try:
                 pos = [float(x) for x in xs]
@@ -182,10 +213,12 @@ def sweep_panels(axis: str, panels: list[tuple[str, dict]]) -> bytes:
             ax.plot(pos, mean, marker="o", label=label)
             ax.fill_between(pos, lo, hi, alpha=0.2)
         ax.set_xlabel(axis, fontsize=8)
+        ax.set_ylabel(metric, fontsize=8)
         ax.set_title(metric, fontsize=9)
         ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
     axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
     return _png(fig)
 
 
@@ -213,8 +246,12 @@ def view_bars(names: list[str], residual: list, gross: list) -> bytes:
     fig, axes = plt.subplots(1, 2, figsize=(max(6, 0.35 * len(names) + 4), 3))
     for ax, values, title in ((axes[0], residual, "median relative residual"),
                               (axes[1], gross, "share of gross errors (> 20 % of exposure)")):
-        ax.bar(x, [np.nan if v is None else v for v in values])
+        shown = [np.nan if v is None else v for v in values]
+        ax.bar(x, shown)
         ax.set_title(title, fontsize=9)
         ax.set_xticks(x, [str(i) for i in range(len(names))], fontsize=7)
         ax.set_xlabel("view")
+        ax.set_ylabel("share of the view's observations" if ax is axes[1] else "relative residual")
+        if not np.nansum(shown):
+            ax.text(0.5, 0.5, "none in any view", ha="center", va="center", transform=ax.transAxes, color="#555")
     return _png(fig)

@@ -58,7 +58,8 @@ def summary_rows(metrics: dict) -> list[tuple[str, str]]:
             continue
         value = lookup(metrics, path)
         if value is not None:
-            rows.append((label, fmt.format(value)))
+            arrow = {"up": " ↑", "down": " ↓"}.get(direction(path), "")
+            rows.append((label + arrow, fmt.format(value)))
     return rows
 
 
@@ -74,19 +75,87 @@ def embed_png(png: bytes, alt: str) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode()}">'
 
 
-_STYLE = """body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
-table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:left}
-th{background:#f0f0f0}img{max-width:100%;margin:0.5em 0}h2{margin-top:1.6em}
-.ok{color:#176617}.bad{color:#a11}pre{background:#f6f6f6;padding:1em;overflow:auto;font-size:12px}"""
+STYLE = """body{font-family:system-ui,sans-serif;margin:2em;max-width:1400px;color:#222}
+table{border-collapse:collapse;margin:1em 0;font-size:13px}td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}
+th{background:#f0f0f0}img{max-width:100%;margin:0.5em 0}h2{margin-top:1.6em}.wide{overflow-x:auto}
+table.lb th{cursor:pointer;white-space:nowrap}table.lb td.best{background:#d6f0d6;font-weight:600}
+.ok{color:#176617}.bad{color:#a11}pre{background:#f6f6f6;padding:1em;overflow:auto;font-size:12px}
+.note{color:#555;font-size:13px}"""
+
+# sorts a leaderboard by the clicked column: numbers (data-v) before text, again to reverse
+SORT_SCRIPT = """<script>
+function sortBy(th){
+ const body=th.closest('table').tBodies[0],i=th.cellIndex,asc=th.dataset.asc!=='1';
+ th.dataset.asc=asc?'1':'0';
+ const key=r=>{const c=r.cells[i];return c.dataset.v!==undefined?parseFloat(c.dataset.v):c.textContent;};
+ const rows=[...body.rows];
+ rows.sort((a,b)=>{const x=key(a),y=key(b);
+  if(typeof x==='number'&&typeof y==='number')return asc?x-y:y-x;
+  if(typeof x==='number')return -1;if(typeof y==='number')return 1;
+  return asc?String(x).localeCompare(y):String(y).localeCompare(x);});
+ rows.forEach(r=>body.appendChild(r));}
+</script>"""
+
+LEADERBOARD_NOTE = ("<p class='note'>↑ higher is better, ↓ lower is better; the best value of each such column is "
+                    "highlighted; click a column's header to sort by it.</p>")
+
+
+def direction(key: str) -> str | None:
+    """'up' where a higher value of the metric ``key`` (a dotted path) is better, 'down' where
+    lower is, None where neither (a count, a ratio whose best is 1, a name)."""
+    leaf = key.lower().split(".")[-1]
+    if leaf == "ari" or leaf.startswith(("within_", "psnr", "ssim")):
+        return "up"
+    if any(part in key.lower() for part in ("relative_l2", "abs_error", "seconds", "ciede", "flip", "lpips")):
+        return "down"
+    return None
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value == value
+
+
+def leaderboard(columns: list[tuple[str, str]], rows: list[dict]) -> str:
+    """A sortable table (the page must hold :data:`SORT_SCRIPT`): columns (label, key), a
+    row per dict; a value is a number, text, or a (mean, spread) pair shown as 'mean ± spread'
+    and sorted by its mean. Each header carries its metric's direction (:func:`direction`),
+    and the best value of each directed column with two or more numbers is highlighted."""
+    def mean(v):
+        return v[0] if isinstance(v, tuple) else v
+
+    dirs = [direction(key) for _, key in columns]
+    best = {}
+    for (_, key), d in zip(columns, dirs):
+        values = [mean(r.get(key)) for r in rows if _number(mean(r.get(key)))]
+        if d and len(values) > 1 and max(values) > min(values):   # a tie of every row marks nothing
+            best[key] = max(values) if d == "up" else min(values)
+    head = "".join(f"<th onclick='sortBy(this)' title='click to sort'>{html.escape(label)}"
+                   f"{' ↑' if d == 'up' else ' ↓' if d == 'down' else ''}</th>" for (label, _), d in zip(columns, dirs))
+    body = []
+    for row in rows:
+        cells = []
+        for _, key in columns:
+            v = row.get(key)
+            m = mean(v)
+            if not _number(m):
+                cells.append(f"<td>{'-' if v is None else html.escape(str(v))}</td>")
+                continue
+            shown = f"{m:.4g} ± {v[1]:.2g}" if isinstance(v, tuple) else f"{m:.4g}" if isinstance(m, float) else str(m)
+            cls = " class='best'" if key in best and m == best[key] else ""
+            cells.append(f"<td data-v='{m!r}'{cls}>{html.escape(shown)}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return (f"<div class='wide'><table class='lb'><thead><tr>{head}</tr></thead><tbody>" + "\n".join(body)
+            + "</tbody></table></div>")
 
 
 def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regressions: list[dict] | None = None) -> str:
     """One self-contained page: summary table, figures (section, caption, PNG bytes), raw metrics."""
     title = f"pseudolight report: {metrics.get('scene', '?')} / {metrics.get('method', '?')}"
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-             f"<style>{_STYLE}</style></head><body><h1>{html.escape(title)}</h1>",
+             f"<style>{STYLE}</style></head><body><h1>{html.escape(title)}</h1>",
              f"<p>dataset <code>{html.escape(str(metrics.get('dataset')))}</code>, run "
              f"<code>{html.escape(str(metrics.get('run')))}</code></p>",
+             "<p class='note'>↑ higher is better, ↓ lower is better.</p>",
              "<table><tr><th>metric</th><th>value</th></tr>"]
     parts += [f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>" for k, v in summary_rows(metrics)]
     parts.append("</table>")
@@ -153,17 +222,11 @@ def regression_table(rows: list[dict]) -> str:
 
 
 def compare_page(rows: list[dict], columns: list[tuple[str, str]], figures: list[tuple[str, bytes]]) -> str:
-    """compare.html: one table (a row per run) and overlaid histograms."""
+    """compare.html: one sortable leaderboard (a row per run, named by its scene, method and,
+    from a sweep, its sweep values and seed) and the overlaid histograms."""
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>pseudolight comparison</title>"
-             f"<style>{_STYLE}</style></head><body><h1>pseudolight comparison</h1><table><tr>"]
-    parts += [f"<th>{html.escape(label)}</th>" for label, _ in columns] + ["</tr>"]
-    for row in rows:
-        cells = []
-        for _, key in columns:
-            v = row.get(key)
-            cells.append("-" if v is None else (f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))))
-        parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
-    parts.append("</table>")
+             f"<style>{STYLE}</style>{SORT_SCRIPT}</head><body><h1>pseudolight comparison</h1>",
+             LEADERBOARD_NOTE, leaderboard(columns, rows)]
     for caption, png in figures:
         parts.append(f"<figure>{embed_png(png, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>")
     return "\n".join(parts + ["</body></html>"])

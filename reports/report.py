@@ -7,6 +7,7 @@ writing the report folder are the harness's (``harness.cli.reporting``).
 """
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field
 
@@ -140,8 +141,9 @@ def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], render
     return ReportContent(m, ev.ratios, figs)
 
 
-COMPARE_COLUMNS = [
-    ("scene", "scene"), ("method", "method"), ("components", "components"),
+IDENTITY_COLUMNS = [("scene", "scene"), ("method", "method"), ("sweep values", "sweep_values"), ("seed", "seed"),
+                    ("components", "components")]
+COMPARE_COLUMNS = IDENTITY_COLUMNS + [
     ("SH rel. L2", "illumination.relative_l2"),
     ("spec ±10 % (DC)", "albedo.specular.dc.luminance.within_10"),
     ("spec median", "albedo.specular.dc.luminance.median_ratio"),
@@ -155,12 +157,20 @@ COMPARE_COLUMNS = [
 ]
 
 
-def compare_row(metrics: dict, ratios: dict, folder: str) -> dict:
+def sweep_values(axes: dict) -> str:
+    """A sweep row's axis values as one short text: 'views=6, sh_order=4'."""
+    return ", ".join(f"{k}={json.dumps(v) if isinstance(v, (list, dict)) else v}" for k, v in axes.items())
+
+
+def compare_row(metrics: dict, ratios: dict, folder: str, tag: dict | None = None) -> dict:
     """One row of the comparison table from a report's metrics and its DC-gauge ratios
-    (component -> (n, 4) array, luminance in column 3)."""
-    row = {"folder": folder, "scene": metrics.get("scene"), "method": metrics.get("method"),
+    (component -> (n, 4) array, luminance in column 3). ``tag``: the run's place in a sweep
+    (its method label, axes and seed), which its report does not know."""
+    tag = tag or {}
+    row = {"folder": folder, "scene": metrics.get("scene"), "method": tag.get("label") or metrics.get("method"),
+           "sweep_values": sweep_values(tag["axes"]) if tag.get("axes") else None, "seed": tag.get("seed"),
            "components": (metrics.get("parameters") or {}).get("components")}
-    for _, key in COMPARE_COLUMNS[3:]:
+    for _, key in COMPARE_COLUMNS[len(IDENTITY_COLUMNS):]:
         if key != "diffuse_median_abs_error":
             row[key] = lookup(metrics, key)
     row["diffuse_median_abs_error"] = None
@@ -172,15 +182,24 @@ def compare_row(metrics: dict, ratios: dict, folder: str) -> dict:
     return row
 
 
-def compare_figures(entries: list[tuple[dict, dict]]) -> list[tuple[str, bytes]]:
-    """Overlaid ratio histograms per (scene, component) over (metrics, ratios) pairs, and per
-    scene the diffuse albedo error against estimate time (a point per run, a curve for a
-    method that records its albedo over time)."""
+def run_label(row: dict) -> str:
+    """A comparison row's name in a legend: its method, and its sweep values and seed when
+    it has them (runs of one method that differ only there must not look alike)."""
+    parts = [str(row.get("method"))] + [str(row[k]) for k in ("sweep_values",) if row.get(k)]
+    return " · ".join(parts + ([f"seed {row['seed']}"] if row.get("seed") is not None else []))
+
+
+def compare_figures(entries: list[tuple[dict, dict]], labels: list[str] | None = None) -> list[tuple[str, bytes]]:
+    """Overlaid ratio histograms per (scene, component) over (metrics, ratios) pairs, each
+    named by its entry of ``labels`` (default: its method), and per scene the diffuse albedo
+    error against estimate time (a point per run, a curve for a method that records its
+    albedo over time)."""
     hist: dict = {}
     timing: dict = {}
-    for metrics, ratios in entries:
+    labels = labels or [str(m.get("method")) for m, _ in entries]
+    for (metrics, ratios), label in zip(entries, labels):
         for comp, r in ratios.items():
-            hist.setdefault((metrics.get("scene"), comp), []).append((metrics.get("method"), r[:, 3]))
+            hist.setdefault((metrics.get("scene"), comp), []).append((label, r[:, 3]))
         point = error_against_time(metrics)
         if point is not None:
             timing.setdefault(metrics.get("scene"), []).append(point)
@@ -204,9 +223,8 @@ def error_against_time(metrics: dict) -> dict | None:
     return {"method": metrics.get("method"), "seconds": float(seconds), "psnr": float(psnr), "curve": curve}
 
 
-def text_table(rows: list[dict]) -> list[str]:
-    """The comparison as plain-text lines, one per row plus the header."""
-    cols = COMPARE_COLUMNS
+def text_table(rows: list[dict], cols: list[tuple[str, str]] = COMPARE_COLUMNS) -> list[str]:
+    """Rows as plain-text lines under the columns (label, key), one per row plus the header."""
     cells = [[label for label, _ in cols]] + [
         ["-" if r.get(k) is None else (f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k])) for _, k in cols]
         for r in rows]

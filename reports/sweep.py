@@ -12,8 +12,9 @@ import numpy as np
 from estimator import InputError
 
 from . import figures
-from .html import embed_png
+from .html import LEADERBOARD_NOTE, SORT_SCRIPT, STYLE, embed_png, leaderboard
 from .regression import TRACKED, check
+from .report import sweep_values
 
 SWEEP_METRICS = [  # (label, key in a sweep row)
     ("diffuse ±10 % (lstsq)", "albedo.diffuse.lstsq.luminance.within_10"),
@@ -108,8 +109,10 @@ def write(folder: str, name: str, rows: list[dict], verdict: list[dict] | None =
     os.makedirs(folder, exist_ok=True)
     _atomic_text(os.path.join(folder, "sweep.json"), json.dumps({"suite": name, "rows": rows}, indent=1, default=str))
     name = str(name)
-    parts = [f"<html><head><meta charset='utf-8'><title>{html.escape(name)} sweep</title></head><body>",
-             f"<h1>Sweep: {html.escape(name)}</h1>"]
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(name)} sweep</title>"
+             f"<style>{STYLE}</style>{SORT_SCRIPT}</head><body>", f"<h1>Sweep: {html.escape(name)}</h1>",
+             f"<p class='note'>{len(rows)} runs; plots: the mean over seeds (and the sweep's other axes) with "
+             "a band from the lowest to the highest value.</p>"]
     if verdict is not None:
         worse = [v for v in verdict if v["status"] != "ok"]
         _atomic_text(os.path.join(folder, "regression.json"),
@@ -118,14 +121,19 @@ def write(folder: str, name: str, rows: list[dict], verdict: list[dict] | None =
                      "tracked metrics within tolerance</h2>")
         if worse:
             parts.append(
-                "<table border='1'><tr><th>row</th><th>metric</th><th>baseline</th><th>now</th></tr>"
+                "<table><tr><th>row</th><th>metric</th><th>baseline</th><th>now</th></tr>"
                 + "".join(
                     f"<tr><td>{html.escape(v['row'])}</td><td>{html.escape(v['metric'])}</td><td>{v['baseline']:.4g}</td>"
-                    f"<td>{'missing' if v['current'] is None else format(v['current'], '.4g')}</td></tr>"
+                    f"<td class='bad'>{'missing' if v['current'] is None else format(v['current'], '.4g')}</td></tr>"
                     for v in worse
                 )
                 + "</table>"
             )
+    metric_columns = [(label, key) for label, key in SWEEP_METRICS]
+    parts += ["<h2>Over seeds</h2>", LEADERBOARD_NOTE,
+              leaderboard(TABLE_COLUMNS[:3] + [("seeds", "seeds")]
+                          + [(f"{label} (mean ± sd)", key) for label, key in metric_columns],
+                          over_seeds(rows))]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         axes = list(dict.fromkeys(a for r in rows if r["scene"] == scene for a in r["axes"]))
         for axis in axes:
@@ -134,14 +142,37 @@ def write(folder: str, name: str, rows: list[dict], verdict: list[dict] | None =
             if panels:
                 parts.append(f"<h2>{html.escape(scene)}: {html.escape(axis)}</h2>")
                 parts.append(embed_png(figures.sweep_panels(axis, panels), f"{scene} {axis}"))
-    header = ["scene", "method", "seed", "axes"] + [label for label, _ in SWEEP_METRICS]
-    parts.append("<table border='1'><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>")
-    for r in rows:
-        cells = [r["scene"], r["label"], r["seed"], json.dumps(r["axes"])] + [
-            "-" if r.get(key) is None else f"{r[key]:.3f}" for _, key in SWEEP_METRICS]
-        parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>")
-    parts.append("</table></body></html>")
+    parts += ["<h2>Every run</h2>", leaderboard(TABLE_COLUMNS + metric_columns, table_rows(rows)), "</body></html>"]
     _atomic_text(os.path.join(folder, "sweep.html"), "\n".join(parts))
+
+
+TABLE_COLUMNS = [("scene", "scene"), ("method", "method"), ("sweep values", "sweep_values"), ("seed", "seed")]
+
+
+def table_rows(rows: list[dict]) -> list[dict]:
+    """Sweep rows as the terminal table and the page's table show them: the method label as
+    its method, the axis values as one text."""
+    return [{"scene": r["scene"], "method": r["label"], "sweep_values": sweep_values(r["axes"]), "seed": r["seed"],
+             **{key: r.get(key) for _, key in SWEEP_METRICS}} for r in rows]
+
+
+def over_seeds(rows: list[dict]) -> list[dict]:
+    """One entry per (scene, method label, axis values): the number of seeds and each of
+    :data:`SWEEP_METRICS` as (mean, sample standard deviation) over the seeds that hold it,
+    or the one value where one seed does."""
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["scene"], r["label"], _key(r["axes"])), []).append(r)
+    out = []
+    for (scene, label, _), members in groups.items():
+        entry = {"scene": scene, "method": label, "sweep_values": sweep_values(members[0]["axes"]),
+                 "seeds": len({m["seed"] for m in members})}
+        for _, key in SWEEP_METRICS:
+            values = [float(m[key]) for m in members if isinstance(m.get(key), (int, float)) and m[key] == m[key]]
+            if values:
+                entry[key] = (float(np.mean(values)), float(np.std(values, ddof=1))) if len(values) > 1 else values[0]
+        out.append(entry)
+    return out
 
 
 def _atomic_text(path: str, text: str) -> None:

@@ -234,11 +234,12 @@ def cmd_compare(args) -> int:
 
 
 def cmd_suite(args) -> int:
-    from harness.cli.reporting import print_table
     from harness.sweep.executor import probe_scheduler
     from harness.sweep.runner import claim_sweep_folder, run_sweep
     from harness.sweep.suite import load_suite
-    from reports.sweep import read_rows
+    from reports import sweep as sweep_report
+    from reports.report import text_table
+    from reports.sweep import SWEEP_METRICS, read_rows
 
     if args.scheduler and args.executor != "dask":
         raise InputError("--scheduler names a Dask scheduler; it needs --executor dask")
@@ -257,8 +258,8 @@ def cmd_suite(args) -> int:
     claim_sweep_folder(args.output)
     summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
                         not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline)
-    print_table([{**r, "scene": f"{r['scene']} {json.dumps(r['axes']) if r['axes'] else ''}".strip(),
-                  "method": r["label"]} for r in summary["rows"]])
+    for line in text_table(sweep_report.table_rows(summary["rows"]), sweep_report.TABLE_COLUMNS + SWEEP_METRICS):
+        print(line)
     print(f"{summary['datasets']} datasets, {summary['runs']} runs: {summary['executed']} jobs run, "
           f"{summary['reused']} reused, {summary['seconds']:.1f} s\n"
           f"comparison: {os.path.abspath(os.path.join(args.output, 'compare', 'compare.html'))}\n"

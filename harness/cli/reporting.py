@@ -26,6 +26,7 @@ from reports.report import (
     compare_figures,
     compare_row,
     novel_views,
+    run_label,
     text_table,
 )
 from reports.selfcheck import self_check
@@ -165,10 +166,12 @@ def find_metrics(folder: str) -> str:
     raise RunError(f"{folder} has no metrics.json (nor report/metrics.json): run `pseudolight report` first")
 
 
-def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False) -> list[dict]:
-    """compare.json + compare.html over several reports (methods x scenes)."""
+def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False,
+                 tags: list[dict] | None = None) -> list[dict]:
+    """compare.json + compare.html over several reports (methods x scenes); ``tags``: per
+    folder its place in a sweep (label, axes, seed), shown in its row."""
     entries, rows = [], []
-    for folder in folders:
+    for folder, tag in zip(folders, tags or [None] * len(folders)):
         path = find_metrics(folder)
         metrics = load_json(path, "report metrics", RunError)
         ratios_path = os.path.join(os.path.dirname(path), "ratios.npz")
@@ -178,8 +181,8 @@ def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False) -> l
         except (OSError, ValueError, EOFError):
             raise RunError(f"{ratios_path}: missing or unreadable (not a .npz archive)") from None
         entries.append((metrics, ratios))
-        rows.append(compare_row(metrics, ratios, os.path.abspath(folder)))
-    figs = compare_figures(entries)
+        rows.append(compare_row(metrics, ratios, os.path.abspath(folder), tag))
+    figs = compare_figures(entries, [run_label(r) for r in rows])
     with atomic_directory(out_dir, overwrite=overwrite, inputs=folders, kind="compare") as tmp:
         dump_json(os.path.join(tmp, "compare.json"), {"columns": COMPARE_COLUMNS, "rows": rows})
         with open(os.path.join(tmp, "compare.html"), "w") as f:

@@ -112,7 +112,8 @@ def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int =
              "run": r["folder"], "seconds": done_r[r["id"]]["estimate_seconds"],
              **done_r[r["id"]]["metrics"]} for r in runs]
     compare_dir = os.path.join(out_dir, "compare")
-    compare_runs([os.path.join(r["folder"], "report") for r in runs], compare_dir, overwrite=True)
+    compare_runs([os.path.join(r["folder"], "report") for r in runs], compare_dir, overwrite=True,
+                 tags=[{"label": r["label"], "axes": r["axes"], "seed": r["seed"]} for r in runs])
     verdict = sweep_report.regressions(rows, baseline_rows) if baseline_rows is not None else None
     sweep_report.write(compare_dir, suite["name"], rows, verdict)
     reused = sum(1 for r in list(done_d.values()) + list(done_r.values()) if r.get("reused"))

@@ -116,12 +116,21 @@ def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     assert main(["suite", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
     first = capsys.readouterr().out
     assert "2 datasets, 4 runs: 6 jobs run, 0 reused" in first
+    # the terminal table shows the sweep's own columns, each filled for these methods
+    header, *lines = [line for line in first.splitlines() if line.startswith(("scene ", "sparse-colored "))]
+    assert "diffuse PSNR, lstsq (dB)" in header and "sweep values" in header and len(lines) == 4
+    assert all(line.split().count("-") == 1 for line in lines)   # only the seed, which smoke does not draw
     rows = json.load(open(out / "compare" / "sweep.json"))["rows"]
     assert {r["label"] for r in rows} == {"bilinear-clustered", "median-color"}
     assert {r["axes"]["cameras.count"] for r in rows} == {6, 12}
     html = (out / "compare" / "sweep.html").read_text()
     assert html.count("<img") == 1 and "cameras.count" in html
-    assert (out / "compare" / "compare.html").is_file()
+    assert "Over seeds" in html and "onclick='sortBy(this)'" in html and "class='best'" in html
+    # the comparison's rows name each run's place in the sweep: its axis values and seed
+    compared = json.load(open(out / "compare" / "compare.json"))["rows"]
+    expected = {("cameras.count=6", None), ("cameras.count=12", None)}   # smoke draws no seeds
+    assert {(r["sweep_values"], r["seed"]) for r in compared} == expected
+    assert "cameras.count=12" in (out / "compare" / "compare.html").read_text()
     # resumed: nothing is run again; the runs' files are untouched
     run_json = next((out / "runs").glob("*/run/run.json"))
     stamp = os.path.getmtime(run_json)

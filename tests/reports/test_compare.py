@@ -22,3 +22,13 @@ def test_compare_figures_add_one_time_plot_per_scene():
                             (_metrics("mitsuba-ad", 60.0, 25.0, [(5.0, 12.0), (60.0, 25.0)]), {})])
     assert [title for title, _ in figs] == ["s: diffuse albedo PSNR against estimate time"]
     assert figs[0][1][:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_run_labels_tell_sweep_runs_of_one_method_apart():
+    from reports.report import run_label
+
+    a = {"method": "bilinear-clustered", "sweep_values": "cameras.count=6", "seed": 1}
+    b = {"method": "bilinear-clustered", "sweep_values": "cameras.count=12", "seed": None}
+    assert run_label(a) == "bilinear-clustered · cameras.count=6 · seed 1"
+    assert run_label(b) == "bilinear-clustered · cameras.count=12"
+    assert run_label({"method": "median-color", "sweep_values": None, "seed": None}) == "median-color"
