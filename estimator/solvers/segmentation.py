@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
+from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.sparse.csgraph import connected_components
 
 from ..core.reductions import group_quantile
@@ -47,15 +48,19 @@ def albedo_features(albedo: np.ndarray) -> np.ndarray:
 
 def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
             threshold: float = SegmentationConfig.segment_threshold,
-            uniform_spread: float = SegmentationConfig.uniform_spread, min_size: int = 10, merge_bandwidth: float = 0.12
-            ) -> tuple[np.ndarray, np.ndarray]:
+            uniform_spread: float = SegmentationConfig.uniform_spread, min_size: int = 10,
+            merge_bandwidth: float = 0.12, merge: str = "mean-shift") -> tuple[np.ndarray, np.ndarray]:
     """Uniform-albedo regions on the face-adjacency graph.
 
     Neighbours whose :func:`albedo_features` differ by less than ``threshold`` (largest
     component) are joined (connected components). A component of at least ``min_size``
     faces whose feature spread (median absolute deviation, largest component) is below
-    ``uniform_spread`` is uniform; uniform components with similar albedo (mean shift,
-    ``merge_bandwidth``) are one region even when apart.
+    ``uniform_spread`` is uniform; uniform components with similar albedo are one region even
+    when apart: with ``merge='mean-shift'`` those a mean shift (``merge_bandwidth``) takes to
+    one mode, which also joins components up to about twice that apart (generous, for a
+    light fit that tests the ties: :func:`split_regions`); with ``merge='complete'`` those
+    whose medians all lie within ``threshold`` of each other in every feature (complete
+    linkage: no chain of small steps), as they would have been joined had they touched.
 
     Returns
     -------
@@ -76,7 +81,11 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     labels = np.full(f, -1, dtype=np.int64)
     if not uniform.any():
         return labels, np.zeros((0, albedo.shape[1]))
-    merged, _ = mean_shift(medians[uniform], merge_bandwidth, metric="euclidean")
+    if merge == "complete":
+        merged = (fcluster(linkage(medians[uniform], method="complete", metric="chebyshev"), threshold,
+                           criterion="distance") - 1) if uniform.sum() > 1 else np.zeros(1, dtype=np.int64)
+    else:
+        merged, _ = mean_shift(medians[uniform], merge_bandwidth, metric="euclidean")
     region_of_component = np.full(len(ids), -1)
     region_of_component[np.nonzero(uniform)[0]] = merged
     labels[valid] = region_of_component[inverse]
@@ -84,6 +93,27 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     labels[labels >= 0] = compact
     inside = labels >= 0
     return labels, group_quantile(labels[inside], albedo[inside], len(present), 0.5, interpolate=True)
+
+
+def split_regions(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edges: np.ndarray,
+                  threshold: float, uniform_spread: float) -> np.ndarray:
+    """(F,) ``labels`` with each region split where, under ``albedo`` (a light fitted with the
+    regions tied), its faces segment (:func:`segment`, complete linkage) into parts more than
+    ``threshold`` apart: a generous merge joined two albedos. Faces of a region in no uniform
+    part stay with its largest part; -1 stays -1. Regions are renumbered 0..R'-1."""
+    inside = valid & (labels >= 0)
+    part, _ = segment(albedo, edges, inside, threshold, uniform_spread, merge="complete")
+    r, p = labels[inside], part[inside]
+    width = int(p.max()) + 2
+    pair = r * width + (p + 1)                  # (region, part); part 0 here: in no uniform part
+    counts = np.bincount(pair, minlength=(int(r.max()) + 1) * width).reshape(-1, width)
+    counts[:, 0] = 0
+    largest = np.argmax(counts, axis=1)         # each region's largest part (0 if it has none)
+    p1 = np.where(p >= 0, p + 1, largest[r])
+    _, compact = np.unique(r * width + p1, return_inverse=True)
+    out = labels.copy()
+    out[inside] = compact
+    return out
 
 
 def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, edges: np.ndarray,

@@ -3,7 +3,7 @@ import numpy as np
 
 from estimator.core.reductions import group_quantile
 from estimator.methods.segmented import BilinearSegmented
-from estimator.solvers.segmentation import albedo_features, segment
+from estimator.solvers.segmentation import albedo_features, segment, split_regions
 
 from .meshes import sphere
 
@@ -43,6 +43,45 @@ def test_segment_finds_regions_of_one_albedo_apart_and_together():
     for r in range(3):
         assert len(np.unique(truth[labels == r])) == 1
     np.testing.assert_allclose(np.sort(medians[:, 0]), np.sort(palette[:, 0]), rtol=0.05)
+
+
+def test_complete_merge_joins_regions_apart_only_when_their_albedos_agree():
+    mesh = sphere(3)
+    band = np.digitize(mesh.centroids[:, 1], [-0.6, -0.2, 0.2, 0.6])   # five bands, none touching the next but one
+    red, blue = np.array([0.9, 0.6, 0.3]), np.array([0.1, 0.2, 0.6])
+    # bands 0, 2, 4: one red in steps of 6 % (log brightness 0, 0.06, 0.12); bands 1 and 3: two
+    # blues 20 % apart (0.2 in log brightness, beyond a uniform region's scatter of 0.08)
+    albedo = np.select([band[:, None] == b for b in range(4)],
+                       [red * 0.5, blue, red * 0.5 * np.exp(0.06), blue * np.exp(0.2)], red * 0.5 * np.exp(0.12))
+    labels, _ = segment(albedo, mesh.face_adjacency, np.ones(mesh.num_faces, bool), merge="complete")
+    first = [int(labels[band == b][0]) for b in range(5)]
+    assert all(len(np.unique(labels[band == b])) == 1 for b in range(5))
+    assert first[1] != first[3]                                  # 20 % apart: two regions
+    assert first[0] != first[4]                                  # 12 % apart: no chain through the 6 % step
+    assert first[2] in (first[0], first[4])                      # 6 % apart: one region with a neighbour step
+    generous, _ = segment(albedo, mesh.face_adjacency, np.ones(mesh.num_faces, bool))   # the mean shift's merge
+    assert generous[band == 1][0] == generous[band == 3][0]     # ties the blues; the light fit's split parts them
+
+
+def test_split_regions_parts_a_region_of_two_albedos_only():
+    mesh = sphere(3)
+    band = np.digitize(mesh.centroids[:, 1], [-0.6, -0.2, 0.2, 0.6])
+    red, blue = np.array([0.9, 0.6, 0.3]), np.array([0.1, 0.2, 0.6])
+    albedo = np.where((band % 2 == 0)[:, None], red, blue) * np.where((band == 4)[:, None], 1.25, 1.0)
+    rng = np.random.default_rng(4)
+    albedo = albedo * np.exp(0.01 * rng.standard_normal(albedo.shape))
+    # a generous merge tied the three red bands (the top one 25 % brighter) into region 0
+    labels = np.where(band % 2 == 0, 0, 1)
+    labels[band == 3] = -1                               # faces outside every region stay outside
+    valid = np.ones(mesh.num_faces, bool)
+    split = split_regions(labels, albedo, valid, mesh.face_adjacency, 0.12, 0.08)
+    assert np.all(split[band == 3] == -1)
+    assert len({int(split[band == b][0]) for b in (0, 2, 4)}) == 2     # the brighter band leaves
+    assert split[band == 0][0] == split[band == 2][0] and split.max() == 2
+    assert all(len(np.unique(split[band == b])) == 1 for b in range(5))
+    same = split_regions(np.where(band % 2 == 0, 0, 1), albedo * np.where((band == 4)[:, None], 0.8, 1.0), valid,
+                         mesh.face_adjacency, 0.12, 0.08)
+    assert same.max() == 1                                # one albedo per region: nothing to split
 
 
 def test_textured_faces_stay_out_of_uniform_regions():

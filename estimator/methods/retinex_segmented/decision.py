@@ -1,7 +1,8 @@
 """How ``retinex-segmented`` decides where the light comes from: the one file to change for that.
 
 Every hypothesis the data allow is formed (:func:`light_hypotheses`): the edges' (the albedo
-edges, a sun when one lowers their cost, uniform regions tied when they hold), and, because no
+edges, a sun when one lowers their cost, uniform regions tied when they hold, and those regions
+parted where their albedos still differ under the tied light), and, because no
 albedo can bias them, those of the fits of how the colours change across views: the coat's
 lat-long map (a Fresnel dielectric coat), the edges' light on the map's diffuse radiance (the
 coat's reflection removed), and a shared Phong lobe. Each becomes an estimate, and one
@@ -19,7 +20,7 @@ from ...model.estimate import Estimate
 from ...pipeline.prepared import Prepared
 from ...solvers.robust import TUNING, relative_residuals, robust_scale
 from .coat import coat_map_candidate, coat_map_hypothesis, coated_diffuse_hypothesis
-from .edges import edge_hypothesis
+from .edges import edge_hypothesis, parted_regions
 from .lobe import lobe_candidate, lobe_hypothesis
 from .values import FitContext, Hypothesis, LightSource
 
@@ -31,6 +32,8 @@ def light_hypotheses(ctx: FitContext, radiance: np.ndarray, found: Sun | None) -
     ``found``: the sun of an earlier fit (None: the edge stage searches for one)."""
     edges = edge_hypothesis(ctx, radiance, found)
     out = [edges]
+    if edges.source is LightSource.EDGES_AND_REGIONS:
+        out.append(parted_regions(ctx, edges))                  # None: no region parts under the tied light
     coat_map = coat_map_candidate(ctx, regions=edges.regions > 0)
     if coat_map is not None:
         out.append(coat_map_hypothesis(ctx, edges, coat_map))   # None: its sun disagrees with the edges'

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...light import edge_fit, sun
-from ...solvers.segmentation import assign_to_regions, segment
+from ...solvers.segmentation import assign_to_regions, segment, split_regions
 from .shading import deviation, divide, in_unit_dc
 from .values import FitContext, Hypothesis, LightSource, Shading
 
@@ -73,3 +73,28 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
     albedo[tied] = region_albedo[labels[tied]]
     return Hypothesis(h.radiance, light, h.shading, albedo, lit, labels, h.regions, h.share,
                       LightSource.EDGES_AND_REGIONS, h.found, spread, drift)
+
+
+def parted_regions(ctx: FitContext, tied: Hypothesis) -> Hypothesis | None:
+    """The tied hypothesis with each region parted where, under its light, the faces' own
+    albedos fall into parts more than ``segment_threshold`` apart (:func:`split_regions`: the
+    segmentation joins components apart generously, and a light fitted to two albedos tied
+    as one still leaves them apart), the light fitted once more with the parts tied; None
+    where nothing parts. Whether the parts are two albedos or one albedo the model misfits
+    (a coat's reflection in some faces' radiance) is for the prediction cost to decide
+    (:mod:`.decision`): each part's albedo is three more unknowns."""
+    c = ctx.config
+    albedo, lit = divide(tied.shading, tied.radiance, tied.light, ctx.usable, ctx.extra)
+    labels = split_regions(tied.labels, in_unit_dc(albedo, tied.light), lit, ctx.edges, c.segment_threshold,
+                           c.uniform_spread)
+    regions = int(labels.max()) + 1
+    if regions <= tied.regions:
+        return None
+    light, region_albedo = edge_fit.log_shading_fit(tied.radiance, tied.shading.columns, ctx.edges, ctx.usable, labels,
+                                                    initial=tied.light, **ctx.fit)
+    albedo, lit = divide(tied.shading, tied.radiance, light, ctx.usable, ctx.extra)
+    labels = np.where(lit, labels, -1)
+    inside = labels >= 0
+    albedo[inside] = region_albedo[labels[inside]]
+    return Hypothesis(tied.radiance, light, tied.shading, albedo, lit, labels, regions, tied.share,
+                      LightSource.EDGES_AND_PARTED_REGIONS, tied.found, tied.deviation, tied.drift)

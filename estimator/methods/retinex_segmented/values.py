@@ -24,6 +24,7 @@ class LightSource(str, Enum):
 
     EDGES = "edges"
     EDGES_AND_REGIONS = "edges and regions"
+    EDGES_AND_PARTED_REGIONS = "edges and parted regions"
     COAT_MAP = "reflection"
     COAT_MAP_AND_REGIONS = "reflection and regions"
     COAT_MAP_DIFFUSE = "reflection's diffuse, edges' light"
