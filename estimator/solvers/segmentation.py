@@ -102,6 +102,8 @@ def split_regions(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edg
     ``threshold`` apart: a generous merge joined two albedos. Faces of a region in no uniform
     part stay with its largest part; -1 stays -1. Regions are renumbered 0..R'-1."""
     inside = valid & (labels >= 0)
+    if not inside.any():
+        return labels.copy()
     part, _ = segment(albedo, edges, inside, threshold, uniform_spread, merge="complete")
     r, p = labels[inside], part[inside]
     width = int(p.max()) + 2

@@ -82,6 +82,8 @@ def test_split_regions_parts_a_region_of_two_albedos_only():
     same = split_regions(np.where(band % 2 == 0, 0, 1), albedo * np.where((band == 4)[:, None], 0.8, 1.0), valid,
                          mesh.face_adjacency, 0.12, 0.08)
     assert same.max() == 1                                # one albedo per region: nothing to split
+    nothing = split_regions(np.full(mesh.num_faces, -1), albedo, valid, mesh.face_adjacency, 0.12, 0.08)
+    assert np.all(nothing == -1)                          # no region: nothing to part
 
 
 def test_textured_faces_stay_out_of_uniform_regions():
