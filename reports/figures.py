@@ -42,14 +42,16 @@ def _latlong_axes(ax, width: int, height: int) -> None:
     ax.set_ylabel("elevation (deg)", fontsize=8)
 
 
-def _tone_bar(fig, ax, exposure: float, label: str) -> None:   # ax: one axes or a list sharing the bar
-    """A colour bar of the report's tone map for grey values: linear values 0 .. ``exposure``
-    through the sRGB curve (white = ``exposure``), labelled with their units."""
+def _tone_bar(fig, cax, exposure: float, label: str) -> None:
+    """A colour bar, drawn into the axes ``cax``, of the report's tone map for grey values:
+    linear values 0 .. ``exposure`` through the sRGB curve (white = ``exposure``), labelled with
+    their units. (Colour bars get axes of their own in the grid: a layout engine placing them
+    costs about half a second per figure, paid by every report.)"""
     from matplotlib.colors import ListedColormap, Normalize
 
     grey = tonemap(np.linspace(0, 1, 256), 1.0)
     bar = plt.cm.ScalarMappable(Normalize(0, exposure), ListedColormap(np.repeat(grey[:, None], 3, axis=1)))
-    fig.colorbar(bar, ax=ax, shrink=0.85, label=label)
+    fig.colorbar(bar, cax=cax).set_label(label, fontsize=8)
 
 
 def illumination(estimate_sh: np.ndarray, truth_sh: np.ndarray, size=(128, 256)) -> bytes:
@@ -57,12 +59,15 @@ def illumination(estimate_sh: np.ndarray, truth_sh: np.ndarray, size=(128, 256))
     orientation, shared exposure), and their energy per SH band (the paper's Fig. 5 a, b)."""
     est, tru = sh.to_latlong(estimate_sh, *size), sh.to_latlong(truth_sh, *size)
     exposure = float(np.percentile(np.maximum(tru, 0), 99.5))
-    fig, axes = plt.subplots(1, 3, figsize=(14, 3.1), gridspec_kw={"width_ratios": [2, 2, 1.3]}, layout="constrained")
+    fig, axes = plt.subplots(1, 5, figsize=(14, 3.1), gridspec_kw={"width_ratios": [2, 2, 0.06, 0.3, 1.6],
+                                                                    "wspace": 0.3})
+    axes[3].set_visible(False)   # room for the colour bar's label
     _show(axes[0], tonemap(tru, exposure), "ground truth, Phong-filtered (unit DC)")
     _show(axes[1], tonemap(est, exposure), "estimated pseudo illumination")
     for ax in axes[:2]:
         _latlong_axes(ax, size[1], size[0])
-    _tone_bar(fig, list(axes[:2]), exposure, "radiance (unit-DC gauge)")
+    _tone_bar(fig, axes[2], exposure, "radiance (unit-DC gauge)")
+    axes = [axes[0], axes[1], axes[4]]
     order = sh.order_of(estimate_sh.shape[0])
     band = sh.degrees(order)
     for coeffs, label in ((truth_sh, "truth"), (estimate_sh, "estimate")):
@@ -107,7 +112,8 @@ def texture_maps(caster: RayCaster, estimate: dict[str, np.ndarray], truth: dict
     """Estimated (scaled per channel by least squares) vs true per-face albedo as lat-long maps."""
     ids = face_latlong(caster)
     comps = list(estimate)
-    fig, axes = plt.subplots(len(comps), 2, figsize=(11, 2.8 * len(comps)), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(len(comps), 3, figsize=(11, 2.8 * len(comps)), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1, 0.04], "wspace": 0.25})
     for row, comp in zip(axes, comps):
         e, t = estimate[comp], truth[comp]
         s = lstsq_scale(e, t)
@@ -116,7 +122,7 @@ def texture_maps(caster: RayCaster, estimate: dict[str, np.ndarray], truth: dict
             img = np.where(ids[..., None] >= 0, values[np.maximum(ids, 0)], 0.0)
             _show(ax, tonemap(img, top), title)
             _latlong_axes(ax, ids.shape[1], ids.shape[0])
-        _tone_bar(fig, list(row), top, "albedo (linear; white = 99.5th pct of the truth)")
+        _tone_bar(fig, row[2], top, "albedo (linear; white = 99.5th pct of the truth)")
     return _png(fig)
 
 
@@ -143,19 +149,20 @@ def clusters(caster: RayCaster, cameras: list[Camera], labels: np.ndarray, regio
 def image_comparison(names, predictions, references, masks, title: str) -> bytes:
     """Reference | prediction | difference, tone mapped with the reference's exposure."""
     n = len(names)
-    fig, axes = plt.subplots(n, 3, figsize=(11, 2.8 * n), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(n, 5, figsize=(11, 2.8 * n), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1, 0.05, 1, 0.05], "wspace": 0.3})
     for row, name, p, r, m in zip(axes, names, predictions, references, masks):
         exposure = max(float(np.percentile(r[m], 99)) if m.any() else 1.0, 1e-30)
         s = lstsq_scale(p[m], r[m]) if m.any() else np.ones(3)
         _show(row[0], tonemap(r, exposure), f"{name}: reference")
         _show(row[1], tonemap(p * s, exposure), f"{title}")
-        _tone_bar(fig, list(row[:2]), exposure, "radiance (scene units)")
+        _tone_bar(fig, row[2], exposure, "radiance (scene units)")
         diff = np.abs(p * s - r) @ LUMINANCE / exposure
-        im = row[2].imshow(np.where(m, diff, 0), cmap="magma", vmin=0, vmax=0.25)
-        fig.colorbar(im, ax=row[2], shrink=0.85, label="|difference| / exposure (luminance)")
-        row[2].set_title("difference (compared pixels)", fontsize=9)
-        row[2].set_xticks([])
-        row[2].set_yticks([])
+        im = row[3].imshow(np.where(m, diff, 0), cmap="magma", vmin=0, vmax=0.25)
+        fig.colorbar(im, cax=row[4]).set_label("|difference| / exposure (luminance)", fontsize=8)
+        row[3].set_title("difference (compared pixels)", fontsize=9)
+        row[3].set_xticks([])
+        row[3].set_yticks([])
     return _png(fig)
 
 
