@@ -27,6 +27,7 @@ code; ``benchmarks/protocol_check.py`` compares these numbers with it.
 """
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -42,6 +43,7 @@ ORB_HDR_MAX = 4.0        # PSNR-H clips linear values to [0, 4]
 ORB_SSIM_WINDOW = 3      # Stanford-ORB calls kornia's SSIM with a 3-pixel window
 SSIM_SIGMA = 1.5         # Wang et al. 2004
 NERFACTOR_GAMMA = 2.2
+_LPIPS = None            # the LPIPS network, built on first use
 
 
 @dataclass(frozen=True)
@@ -131,8 +133,6 @@ def lpips_vgg(prediction_srgb: np.ndarray, reference_srgb: np.ndarray) -> tuple[
         return float(_LPIPS(tensor(prediction_srgb), tensor(reference_srgb), normalize=True).item()), None
 
 
-_LPIPS = None
-
 
 def lpips_unavailable() -> str | None:
     """Why LPIPS cannot be computed here, or None when it can."""
@@ -141,8 +141,6 @@ def lpips_unavailable() -> str | None:
         import torch
     except ImportError as exc:
         return f"LPIPS unavailable: {exc.name} is not installed (pip install .[lpips])"
-    import os
-
     weights = os.path.join(torch.hub.get_dir(), "checkpoints")
     if not (os.path.isdir(weights) and any(f.startswith("vgg16") for f in os.listdir(weights))):
         return (f"LPIPS unavailable: torchvision's VGG16 weights are not in {weights} (it downloads them on "
@@ -181,12 +179,15 @@ def _masked_psnr_ssim(pred: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> di
     return {"psnr": metrics.psnr(pred, ref, mask, 1.0), "ssim": metrics.ssim(pred, ref, mask, 1.0)}
 
 
+def _gamma(linear: np.ndarray) -> np.ndarray:
+    """NeRFactor's encoding: values clipped to [0, 1], to the power 1/2.2."""
+    return np.clip(linear, 0.0, 1.0) ** (1 / NERFACTOR_GAMMA)
+
+
 def nerfactor(predictions: list, references: list, masks: list) -> dict:
     views = []
     for p, r, m in zip(predictions, references, masks):
-        aligned = metrics.align_scale(p, r, m)
-        encode = lambda x: np.clip(x, 0.0, 1.0) ** (1 / NERFACTOR_GAMMA)   # noqa: E731
-        views.append(_masked_psnr_ssim(encode(aligned), encode(r), m))
+        views.append(_masked_psnr_ssim(_gamma(metrics.align_scale(p, r, m)), _gamma(r), m))
     return {"per_view": views}
 
 

@@ -129,10 +129,9 @@ def write(folder: str, name: str, rows: list[dict], verdict: list[dict] | None =
                 )
                 + "</table>"
             )
-    metric_columns = [(label, key) for label, key in SWEEP_METRICS]
     parts += ["<h2>Over seeds</h2>", LEADERBOARD_NOTE,
               leaderboard(TABLE_COLUMNS[:3] + [("seeds", "seeds")]
-                          + [(f"{label} (mean ± sd)", key) for label, key in metric_columns],
+                          + [(f"{label} (mean ± sd)", key) for label, key in SWEEP_METRICS],
                           over_seeds(rows))]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         axes = list(dict.fromkeys(a for r in rows if r["scene"] == scene for a in r["axes"]))
@@ -142,7 +141,7 @@ def write(folder: str, name: str, rows: list[dict], verdict: list[dict] | None =
             if panels:
                 parts.append(f"<h2>{html.escape(scene)}: {html.escape(axis)}</h2>")
                 parts.append(embed_png(figures.sweep_panels(axis, panels), f"{scene} {axis}"))
-    parts += ["<h2>Every run</h2>", leaderboard(TABLE_COLUMNS + metric_columns, table_rows(rows)), "</body></html>"]
+    parts += ["<h2>Every run</h2>", leaderboard(TABLE_COLUMNS + SWEEP_METRICS, table_rows(rows)), "</body></html>"]
     _atomic_text(os.path.join(folder, "sweep.html"), "\n".join(parts))
 
 
