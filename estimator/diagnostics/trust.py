@@ -8,6 +8,7 @@ diagnostic that makes the result doubtful becomes one warning line.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..model.estimate import Estimate
 from ..pipeline.exposure import view_gains
@@ -19,14 +20,13 @@ MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-fre
 GROSS_RESIDUAL = 0.2        # a gross error: residual above 20 % of the exposure level
 OUTLIER_VIEW_SHARE = 0.05   # a view is an outlier when this share of its rows are gross errors ...
 OUTLIER_VIEW_FACTOR = 5.0   # ... and this many times the median view's share ...
-OUTLIER_VIEW_ROWS = 10      # ... and at least this many rows (a few faces of a small view are chance) ...
-NEIGHBOUR_VIEWS = 3         # ... and OUTLIER_VIEW_FACTOR x the median share of its this many nearest views
+OUTLIER_VIEW_ROWS = 10      # ... and at least this many rows (a few faces of a small view are chance)
 HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
 ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
 MAX_UNKEPT = 0.2            # share of faces without a kept observation
 
 
-CONDITION_ROWS = 200_000    # a streamed problem's light condition is taken on this many rows drawn at random
+CONDITION_ROWS = 200_000    # a streamed problem's light condition and mirror neighbours use this many rows
 
 
 def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -59,23 +59,54 @@ def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
     return worst
 
 
-def _add_neighbour_shares(views: list[dict], prep: Prepared) -> None:
-    """Give each view's summary ``neighbour_gross_share``: the median gross-error share of the
-    NEIGHBOUR_VIEWS views nearest to it in direction from the object's centre. A model misfit
-    that depends on the viewing direction (a reflection the model lacks) raises the share of
-    neighbouring views together; glare, an occluder or a wrong pose raise one view's alone."""
-    if len(views) != len(prep.data.views) or len(views) < NEIGHBOUR_VIEWS + 1:
-        return
-    centre = prep.data.mesh.vertices.mean(axis=0)
-    dirs = np.array([v.camera.center for v in prep.data.views]) - centre
-    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
-    shares = np.array([np.nan if v["gross_share"] is None else v["gross_share"] for v in views])
-    cosines = dirs @ dirs.T
-    np.fill_diagonal(cosines, -np.inf)
-    nearest = np.argsort(-cosines, axis=1)[:, :NEIGHBOUR_VIEWS]
-    for v, near in zip(views, nearest):
-        known = shares[near][np.isfinite(shares[near])]
-        v["neighbour_gross_share"] = float(np.median(known)) if len(known) else None
+def reflected_rows(prep: Prepared, labels: np.ndarray, residual: np.ndarray, relative: np.ndarray,
+                   estimated: np.ndarray, rows: np.ndarray, threshold: float) -> np.ndarray:
+    """Which of the given rows a reflection the model lacks explains rather than a fault of their view.
+
+    A highlight is a property of the scene: wherever a view's mirror direction about a face's
+    normal meets a bright light, the face is brighter than the model predicts if the model
+    lacks that reflection, and darker if it predicts a highlight that is not there, in every
+    view. Glare, an occluder or a wrong pose belong to one view. A row counts as reflected
+    when the row of another view nearest to it in mirror direction, on a face of the same
+    estimated group (the same material, on an object that mixes matte and glossy parts; any
+    estimated face where the estimate groups none, as a per-face method), is an outlier too
+    (relative residual above ``threshold``) with a residual of the same sign. The nearest row,
+    not a vote of several: a sharp light's highlight spans a few degrees of mirror direction,
+    and the next rows out already miss it.
+
+    labels : (F,) the estimate's group per face (-1: none). rows : (R,) int indices into the
+    observations; residual (N, 3), relative (N,), estimated (N,) bool per observation.
+    Returns (R,) bool.
+    """
+    obs = prep.obs
+    view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
+    normal = prep.data.mesh.face_normals[obs.face]
+    mirror = 2.0 * np.sum(normal * obs.view_dir, axis=1, keepdims=True) * normal - obs.view_dir
+    pool = np.nonzero(estimated)[0]
+    # a face's material group: its label where the label groups faces, else one group for all
+    sizes = np.bincount(labels[labels >= 0], minlength=max(int(labels.max(initial=-1)) + 1, 1))
+    group = np.where((labels >= 0) & (sizes[np.maximum(labels, 0)] > 1), labels, -1)[obs.face]
+    # groups 4 apart: farther than any two unit vectors (chord <= 2), so neighbours share a group
+    point = np.column_stack([mirror, 4.0 * group])
+    if len(pool) > CONDITION_ROWS:
+        pool = np.sort(np.random.default_rng(0).choice(pool, CONDITION_ROWS, replace=False))
+    if len(rows) == 0 or len(pool) == 0 or obs.num_views < 2:
+        return np.zeros(len(rows), bool)
+    # scipy's k-d tree per view (a view's own rows crowd the nearest mirror directions): the
+    # nearest row of each other view, then the nearest of those (chord distance orders as the angle)
+    distance = np.full((obs.num_views, len(rows)), np.inf)
+    nearest = np.zeros((obs.num_views, len(rows)), dtype=np.int64)
+    for v in np.unique(view[pool]):
+        mine = pool[view[pool] == v]
+        d, i = cKDTree(point[mine]).query(point[rows], k=1)
+        distance[v], nearest[v] = d, mine[np.minimum(i, len(mine) - 1)]
+    distance[view[rows], np.arange(len(rows))] = np.inf
+    closest = np.argmin(distance, axis=0)
+    first = nearest[closest, np.arange(len(rows))]
+    found = np.isfinite(distance[closest, np.arange(len(rows))])
+    found &= group[first] == group[rows]
+    same_sign = np.sign(residual[first].sum(axis=1)) == np.sign(residual[rows].sum(axis=1))
+    return found & same_sign & (relative[first] > threshold)
 
 
 def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict, dict[str, np.ndarray]]:
@@ -97,6 +128,11 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     residual, relative, shade = observation_residuals(prep, est)
     estimated = est.observed[obs.face]
     scale, outlier = _outliers(relative, estimated)
+    gross = estimated & (relative > GROSS_RESIDUAL)
+    gross_rows = np.nonzero(gross)[0]
+    fault = gross.copy()
+    fault[gross_rows[reflected_rows(prep, est.labels, residual, relative, estimated, gross_rows,
+                                    OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE))]] = False
     views = []
     view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
     # each view's exposure relative to the others (geometric mean over channels), a figure: a
@@ -107,9 +143,9 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
         views.append({"view": view_names[v] if v < len(view_names) else str(v), "observations": int(sel.sum()),
                       "residual": float(np.median(relative[sel])) if sel.any() else None,
                       "outlier_share": float(outlier[sel].mean()) if sel.any() else None,
-                      "gross_share": float(np.mean(relative[sel] > GROSS_RESIDUAL)) if sel.any() else None,
+                      "gross_share": float(gross[sel].mean()) if sel.any() else None,
+                      "fault_share": float(fault[sel].mean()) if sel.any() else None,
                       "exposure": float(exposure[v])})
-    _add_neighbour_shares(views, prep)
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     with np.errstate(divide="ignore", invalid="ignore"):
         albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, residual, estimated, outlier))
@@ -187,18 +223,19 @@ def warnings_for(est: Estimate) -> list[str]:
         out.append(f"ill-conditioned: the light's normal equations have condition number "
                    f"{'infinite' if cond is None else f'{cond:.3g}'} (parts of the light are not determined by "
                    "the views; add views or lower sh_order)")
-    shares = [v["gross_share"] for v in trust["views"] if v.get("gross_share") is not None]
-    typical = float(np.median(shares)) if shares else 0.0
-    bad = [v for v in trust["views"] if v.get("gross_share") is not None
-           and v["gross_share"] > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical,
-                                      OUTLIER_VIEW_FACTOR * (v.get("neighbour_gross_share") or 0.0))
-           and v["gross_share"] * v["observations"] >= OUTLIER_VIEW_ROWS]
-    for v in bad:
+    # a view's share of gross errors no reflection explains (older runs: all its gross errors)
+    faults = [(v, v.get("fault_share", v.get("gross_share"))) for v in trust["views"]]
+    typical = float(np.median([s for _, s in faults if s is not None] or [0.0]))
+    bad = [(v, share) for v, share in faults if share is not None
+           and share > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)
+           and share * v["observations"] >= OUTLIER_VIEW_ROWS]
+    for v, share in bad:
         exposure = f"; its exposure is {v['exposure']:.2f}x the views' (view_gains divides out auto-exposure)" \
             if v.get("exposure") is not None else ""
-        out.append(f"outlier view {v['view']}: {100 * v['gross_share']:.1f} % of its observations are off by over "
-                   f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level (typical view {100 * typical:.1f} %): glare, "
-                   f"an occluder or a wrong pose? (pose refinement, pose_rounds, corrects poses){exposure}")
+        out.append(f"outlier view {v['view']}: {100 * share:.1f} % of its observations are off by over "
+                   f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level where other views reflecting the same "
+                   f"directions fit (typical view {100 * typical:.1f} %): glare, an occluder or a wrong pose? "
+                   f"(pose refinement, pose_rounds, corrects poses){exposure}")
     median = trust["residual"]["median_relative"]
     if median is not None and median > HIGH_RESIDUAL:
         out.append(f"high residual: the estimate re-predicts its observations with a median relative error of "

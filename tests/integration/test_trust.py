@@ -117,3 +117,16 @@ def test_each_warning_fires_on_its_condition(trust, info, needle):
     lines = warnings_for(_with_trust(trust, **info))
     assert len(lines) == 1 and needle in lines[0]
     assert warnings_for(_with_trust(_trust())) == []
+
+
+def test_gross_errors_a_reflection_explains_raise_no_outlier_view():
+    """A view whose gross errors other views reflecting the same directions share (its
+    ``fault_share`` 0) is not an outlier however large its gross share."""
+    from estimator.diagnostics.trust import warnings_for
+
+    trust = _trust(shares=(0.0, 0.3, 0.0, 0.0))
+    for v in trust["views"]:
+        v["fault_share"] = 0.0
+    assert warnings_for(_with_trust(trust)) == []
+    trust["views"][1]["fault_share"] = 0.2
+    assert [line[:15] for line in warnings_for(_with_trust(trust))] == ["outlier view v1"]
