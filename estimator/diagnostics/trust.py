@@ -20,7 +20,8 @@ MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-fre
 GROSS_RESIDUAL = 0.2        # a gross error: residual above 20 % of the exposure level
 OUTLIER_VIEW_SHARE = 0.05   # a view is an outlier when this share of its rows are gross errors ...
 OUTLIER_VIEW_FACTOR = 5.0   # ... and this many times the median view's share ...
-OUTLIER_VIEW_ROWS = 10      # ... and at least this many rows (a few faces of a small view are chance)
+OUTLIER_VIEW_ROWS = 10      # ... and at least this many rows (a few faces of a small view are chance) ...
+NEIGHBOUR_VIEWS = 3         # ... and OUTLIER_VIEW_FACTOR x the median gross share of its this many nearest views
 HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
 ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
 MAX_UNKEPT = 0.2            # share of faces without a kept observation
@@ -109,6 +110,25 @@ def reflected_rows(prep: Prepared, labels: np.ndarray, residual: np.ndarray, rel
     return found & same_sign & (relative[first] > threshold)
 
 
+def _add_neighbour_shares(views: list[dict], prep: Prepared) -> None:
+    """Give each view's summary ``neighbour_gross_share``: the median gross-error share of the
+    NEIGHBOUR_VIEWS views nearest to it in direction from the object's centre. A model misfit
+    that depends on the viewing direction (a reflection the model lacks) raises the share of
+    neighbouring views together; glare, an occluder or a wrong pose raise one view's alone."""
+    if len(views) != len(prep.data.views) or len(views) < NEIGHBOUR_VIEWS + 1:
+        return
+    centre = prep.data.mesh.vertices.mean(axis=0)
+    dirs = np.array([v.camera.center for v in prep.data.views]) - centre
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
+    shares = np.array([np.nan if v["gross_share"] is None else v["gross_share"] for v in views])
+    cosines = dirs @ dirs.T
+    np.fill_diagonal(cosines, -np.inf)
+    nearest = np.argsort(-cosines, axis=1)[:, :NEIGHBOUR_VIEWS]
+    for v, near in zip(views, nearest):
+        known = shares[near][np.isfinite(shares[near])]
+        v["neighbour_gross_share"] = float(np.median(known)) if len(known) else None
+
+
 def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict, dict[str, np.ndarray]]:
     """Trust diagnostics of an estimate.
 
@@ -146,6 +166,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
                       "gross_share": float(gross[sel].mean()) if sel.any() else None,
                       "fault_share": float(fault[sel].mean()) if sel.any() else None,
                       "exposure": float(exposure[v])})
+    _add_neighbour_shares(views, prep)
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     with np.errstate(divide="ignore", invalid="ignore"):
         albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, residual, estimated, outlier))
@@ -223,11 +244,13 @@ def warnings_for(est: Estimate) -> list[str]:
         out.append(f"ill-conditioned: the light's normal equations have condition number "
                    f"{'infinite' if cond is None else f'{cond:.3g}'} (parts of the light are not determined by "
                    "the views; add views or lower sh_order)")
-    # a view's share of gross errors no reflection explains (older runs: all its gross errors)
+    # a view's share of gross errors no reflection explains (older runs: all its gross errors),
+    # against all views' and against the gross errors of the views beside it
     faults = [(v, v.get("fault_share", v.get("gross_share"))) for v in trust["views"]]
     typical = float(np.median([s for _, s in faults if s is not None] or [0.0]))
     bad = [(v, share) for v, share in faults if share is not None
-           and share > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical)
+           and share > max(OUTLIER_VIEW_SHARE, OUTLIER_VIEW_FACTOR * typical,
+                           OUTLIER_VIEW_FACTOR * (v.get("neighbour_gross_share") or 0.0))
            and share * v["observations"] >= OUTLIER_VIEW_ROWS]
     for v, share in bad:
         exposure = f"; its exposure is {v['exposure']:.2f}x the views' (view_gains divides out auto-exposure)" \

@@ -121,7 +121,8 @@ def test_each_warning_fires_on_its_condition(trust, info, needle):
 
 def test_gross_errors_a_reflection_explains_raise_no_outlier_view():
     """A view whose gross errors other views reflecting the same directions share (its
-    ``fault_share`` 0) is not an outlier however large its gross share."""
+    ``fault_share`` 0), or whose neighbouring views err as much, is not an outlier however
+    large its gross share."""
     from estimator.diagnostics.trust import warnings_for
 
     trust = _trust(shares=(0.0, 0.3, 0.0, 0.0))
@@ -130,3 +131,5 @@ def test_gross_errors_a_reflection_explains_raise_no_outlier_view():
     assert warnings_for(_with_trust(trust)) == []
     trust["views"][1]["fault_share"] = 0.2
     assert [line[:15] for line in warnings_for(_with_trust(trust))] == ["outlier view v1"]
+    trust["views"][1]["neighbour_gross_share"] = 0.05   # 5x that is 0.25 > 0.2: its neighbours err too
+    assert warnings_for(_with_trust(trust)) == []
