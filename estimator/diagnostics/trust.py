@@ -81,31 +81,34 @@ def reflected_rows(prep: Prepared, labels: np.ndarray, residual: np.ndarray, rel
     """
     obs = prep.obs
     view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
-    normal = prep.data.mesh.face_normals[obs.face]
-    mirror = 2.0 * np.sum(normal * obs.view_dir, axis=1, keepdims=True) * normal - obs.view_dir
     pool = np.nonzero(estimated)[0]
-    # a face's material group: its label where the label groups faces, else one group for all
-    sizes = np.bincount(labels[labels >= 0], minlength=max(int(labels.max(initial=-1)) + 1, 1))
-    group = np.where((labels >= 0) & (sizes[np.maximum(labels, 0)] > 1), labels, -1)[obs.face]
-    # groups 4 apart: farther than any two unit vectors (chord <= 2), so neighbours share a group
-    point = np.column_stack([mirror, 4.0 * group])
     if len(pool) > CONDITION_ROWS:
         pool = np.sort(np.random.default_rng(0).choice(pool, CONDITION_ROWS, replace=False))
     if len(rows) == 0 or len(pool) == 0 or obs.num_views < 2:
         return np.zeros(len(rows), bool)
+    # a face's material group: its label where the label groups faces, else one group for all
+    sizes = np.bincount(labels[labels >= 0], minlength=max(int(labels.max(initial=-1)) + 1, 1))
+    face_group = np.where((labels >= 0) & (sizes[np.maximum(labels, 0)] > 1), labels, -1)
+
+    def point(index: np.ndarray) -> np.ndarray:
+        """(n, 4) mirror direction and 4 x group of the rows ``index``: groups 4 apart lie
+        farther than any two unit vectors (chord <= 2), so a nearest row shares the group."""
+        normal = prep.data.mesh.face_normals[obs.face[index]]
+        out = obs.view_dir[index]
+        mirror = 2.0 * np.sum(normal * out, axis=1, keepdims=True) * normal - out
+        return np.column_stack([mirror, 4.0 * face_group[obs.face[index]]])
+
+    query = point(rows)
     # scipy's k-d tree per view (a view's own rows crowd the nearest mirror directions): the
-    # nearest row of each other view, then the nearest of those (chord distance orders as the angle)
-    distance = np.full((obs.num_views, len(rows)), np.inf)
-    nearest = np.zeros((obs.num_views, len(rows)), dtype=np.int64)
+    # nearest row of any other view (chord distance orders as the angle)
+    best = np.full(len(rows), np.inf)
+    first = np.zeros(len(rows), dtype=np.int64)
     for v in np.unique(view[pool]):
         mine = pool[view[pool] == v]
-        d, i = cKDTree(point[mine]).query(point[rows], k=1)
-        distance[v], nearest[v] = d, mine[np.minimum(i, len(mine) - 1)]
-    distance[view[rows], np.arange(len(rows))] = np.inf
-    closest = np.argmin(distance, axis=0)
-    first = nearest[closest, np.arange(len(rows))]
-    found = np.isfinite(distance[closest, np.arange(len(rows))])
-    found &= group[first] == group[rows]
+        d, i = cKDTree(point(mine)).query(query, k=1)
+        closer = (d < best) & (view[rows] != v)
+        best[closer], first[closer] = d[closer], mine[i[closer]]
+    found = np.isfinite(best) & (face_group[obs.face[first]] == face_group[obs.face[rows]])
     same_sign = np.sign(residual[first].sum(axis=1)) == np.sign(residual[rows].sum(axis=1))
     return found & same_sign & (relative[first] > threshold)
 
