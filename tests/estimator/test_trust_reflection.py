@@ -60,5 +60,6 @@ def test_no_other_view_explains_nothing():
     residual = relative[:, None] * np.ones(3)
     prep = _prep(mirror, np.array([0, 0]))
     prep.obs.num_views = 2
-    assert not reflected_rows(prep, np.full(2, -1), residual, relative, np.ones(2, bool), np.array([0]), 0.1)[0]
-    assert reflected_rows(prep, np.full(2, -1), residual, relative, np.ones(2, bool), np.array([], int), 0.1).shape == (0,)
+    labels, estimated = np.full(2, -1), np.ones(2, bool)
+    assert not reflected_rows(prep, labels, residual, relative, estimated, np.array([0]), 0.1)[0]
+    assert reflected_rows(prep, labels, residual, relative, estimated, np.array([], int), 0.1).shape == (0,)
