@@ -133,7 +133,6 @@ def lpips_vgg(prediction_srgb: np.ndarray, reference_srgb: np.ndarray) -> tuple[
         return float(_LPIPS(tensor(prediction_srgb), tensor(reference_srgb), normalize=True).item()), None
 
 
-
 def lpips_unavailable() -> str | None:
     """Why LPIPS cannot be computed here, or None when it can."""
     try:

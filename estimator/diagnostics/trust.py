@@ -60,6 +60,11 @@ def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
     return worst
 
 
+def _row_views(obs) -> np.ndarray:
+    """(N,) the view of each observation (all view 0 when the observations do not say)."""
+    return obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
+
+
 def reflected_rows(prep: Prepared, labels: np.ndarray, residual: np.ndarray, relative: np.ndarray,
                    estimated: np.ndarray, rows: np.ndarray, threshold: float) -> np.ndarray:
     """Which of the given rows a reflection the model lacks explains rather than a fault of their view.
@@ -80,7 +85,7 @@ def reflected_rows(prep: Prepared, labels: np.ndarray, residual: np.ndarray, rel
     Returns (R,) bool.
     """
     obs = prep.obs
-    view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
+    view = _row_views(obs)
     pool = np.nonzero(estimated)[0]
     if len(pool) > CONDITION_ROWS:
         pool = np.sort(np.random.default_rng(0).choice(pool, CONDITION_ROWS, replace=False))
@@ -157,7 +162,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     fault[gross_rows[reflected_rows(prep, est.labels, residual, relative, estimated, gross_rows,
                                     OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE))]] = False
     views = []
-    view = obs.view if obs.view is not None else np.zeros(len(obs.face), dtype=np.int64)
+    view = _row_views(obs)
     # each view's exposure relative to the others (geometric mean over channels), a figure: a
     # glossy object's view-dependent reflection moves it too (estimator.pipeline.exposure)
     exposure = np.exp(np.log(view_gains(obs)).mean(axis=1)) if obs.view is not None else np.ones(obs.num_views)
