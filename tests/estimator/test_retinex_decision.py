@@ -137,16 +137,19 @@ def test_the_regions_found_do_not_depend_on_the_lights_colour():
     assert len(np.unique(merged[merged >= 0])) == 1
 
 
-@pytest.mark.parametrize("overrides", [{}, {"segment_threshold": 1e-6}])
-def test_the_unknowns_priced_are_the_estimates_own(overrides):
-    """The micro scene as regions (2) and, with no neighbours joined, as a texture: a diffuse
+@pytest.mark.parametrize("overrides, as_regions", [({}, True), ({"segment_threshold": 1e-6}, False)])
+def test_the_unknowns_priced_are_the_estimates_own(overrides, as_regions):
+    """The micro scene as regions and, with no neighbours joined, as a texture: a diffuse
     albedo per region and per free face, a specular per region, or one the free faces share
-    (their fits' median), and the light less its DC (the gauge), per channel."""
+    (their fits' median), and the light less its DC (the gauge), per channel. (Its two albedos
+    under a strong Phong lobe and no noise sit at the segmentation's threshold: whether the
+    lobe parts them further changes with the last digits of the light, so the test takes the
+    partition the estimate found.)"""
     data, _ = micro_scene()
     est = estimate(data, None, micro_config(**overrides))
     regions = est.info["uniform_regions"]
     free = int((est.observed & (est.labels >= regions)).sum())
-    assert (regions, free > 0) in [(2, False), (0, True)]
+    assert (regions >= 2 and free == 0) if as_regions else (regions == 0 and free > 0)
     light = est.light.shape[0] - 1
     assert est.info["degrees_of_freedom"]["unknowns"] == 3 * (regions + free + (regions or 1) + light)
 
