@@ -251,8 +251,8 @@ def _normal_equations(g, graph, member, group, regions, weights, residual):
     ``g`` (F, k) is the log shading's gradient per face (diffuse rows over the shading). An
     edge's row is -(g_i - g_j) = -(B g)_e with B the (E', F) signed incidence of ``graph``
     (:class:`EdgeGraph`), so the edges give g^T B^T W B g (a weighted graph Laplacian) and
-    -g^T B^T W r; a region row of face f in group r is [-g_f, -e_r]. Memory and time grow with faces x k^2, not
-    edges x k^2.
+    -g^T B^T W r; a region row of face f in group r is [-g_f, -e_r]. Memory and time grow with
+    faces x k^2, not edges x k^2.
     """
     k = g.shape[1]
     ne = len(graph)
