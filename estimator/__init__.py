@@ -8,6 +8,7 @@ public API that ``harness``, ``reports``, tests and benchmarks import; the rooms
 from .api import DEFAULT_METHOD, EXPONENT_CANDIDATES, estimate
 from .config import COMPONENTS, DIFFUSE_LIGHTS, LOSSES, SPECULAR_MODELS, EstimatorConfig
 from .core import camera, latlong, sh
+from .core.atlas import uv_atlas
 from .core.camera import Camera, gl_to_mitsuba, look_at, mitsuba_sensor, mitsuba_to_gl
 from .core.data import MultiViewData, TriangleMesh, View
 from .core.errors import InputError
@@ -42,6 +43,7 @@ __all__ = [
     "SPECULAR_MODELS",
     "psnr_db",
     "unit_dc",
+    "uv_atlas",
     "VARIANTS",
     "axis_angle_matrix",
     "diffuse_matrix",

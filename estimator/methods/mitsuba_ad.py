@@ -1,22 +1,35 @@
 """The peer a user would otherwise reach for: gradient-based inverse rendering with
 Mitsuba 3's differentiable renderer, registered as the method ``mitsuba-ad``.
 
-Unknowns: a per-face diffuse albedo and a per-face specular weight (``mesh_attribute``s of
-the mesh: a ``blendbsdf`` of a Lambertian ``diffuse`` and a near-mirror ``roughconductor``,
-GGX alpha :data:`AD_GLOSS_ALPHA`, weighted by w per face; Mitsuba's ``plastic`` cannot take
-mesh-attribute textures), and a low-resolution lat-long environment map of radiance. Each
-step renders one training view (round robin) with ``prb`` (direct light with shadows, the
-glossy reflection of the envmap, background hidden) at a reduced resolution and a few
-samples, takes the L2 loss against the view's image averaged to that resolution, and
-updates all of them with Adam; values are clipped at a small positive floor (positivity),
-w at 1. The envmap is coarse to fine: its resolution doubles halfway through the time
-budget. The run stops at ``ad_time_budget`` seconds (or after ``ad_max_steps`` steps). ``ad_specular`` False keeps the
-Lambertian model (no specular unknown).
+With ``ad_albedo = "atlas"`` (the default) it is set up as published baselines ship it: the
+mesh unwrapped into a UV atlas (xatlas, :mod:`estimator.core.atlas`), Mitsuba's ``principled``
+BSDF with a base-colour texture and a roughness texture over that atlas (``specular`` 0.5, a
+dielectric of index 1.5; metallic 0), and a lat-long environment map of radiance. The loss is
+the L2 image error plus ``ad_tv_weight`` times the total variation of the textures (scaled by
+the images' squared mean level, so that the weight does not depend on the exposure); Adam's
+learning rate decays exponentially to :data:`AD_FINAL_LR_RATIO` of ``ad_learning_rate`` over the
+run. A face's diffuse albedo is its area mean of the base colour (:func:`face_means`).
+
+With ``ad_albedo = "face"`` the unknowns are a per-face diffuse albedo and a per-face specular
+weight (``mesh_attribute``s: a ``blendbsdf`` of a Lambertian ``diffuse`` and a near-mirror
+``roughconductor``, GGX alpha :data:`AD_GLOSS_ALPHA`, weighted by w per face; Mitsuba's ``plastic``
+cannot take mesh-attribute textures). ``ad_specular`` False keeps a Lambertian model (no
+specular unknown) in both set-ups.
+
+Each step renders one training view (round robin) with ``prb`` (direct light with shadows,
+the glossy reflection of the envmap, background hidden) at a reduced resolution and a few
+samples, takes the loss against the view's image averaged to that resolution, and updates
+the unknowns with Adam; values are clipped to their ranges (positivity; a weight, a colour
+or a roughness at most 1). The envmap is coarse to fine: its resolution doubles halfway
+through the run. The run stops at ``ad_time_budget`` seconds (or after ``ad_max_steps``
+steps).
 
 The light becomes the estimate's pseudo illumination as for every method: the envmap's
 radiance projected to SH, filtered by the Phong lobe of ``phong_exponent``, in the unit-DC
-gauge. The estimate's diffuse albedo is (1 - w) x the fitted albedo, its specular albedo w
-(grey), both in that gauge.
+gauge. With per-face unknowns the estimate's diffuse albedo is (1 - w) x the fitted albedo
+and its specular albedo w (grey); the atlas's ``principled`` model has no Phong specular
+albedo, so its specular albedo is 0 and the median of the faces' mean roughness is kept in
+``info["roughness_median"]``.
 """
 from __future__ import annotations
 
@@ -26,8 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import sh
+from ..core.atlas import face_means, uv_atlas
 from ..core.camera import Camera, gl_to_mitsuba, mitsuba_sensor
-from ..core.data import View
+from ..core.data import TriangleMesh, View
 from ..core.errors import InputError
 from ..core.gauge import unit_dc
 from ..core.interrupt import raise_if_stop_requested
@@ -37,7 +51,9 @@ from ..rays import backend
 from ..rays.raycast import mitsuba_mesh
 from .base import Method, register_method
 
-AD_GLOSS_ALPHA = 0.05   # GGX roughness of the peer's specular lobe (a near-mirror coat)
+AD_GLOSS_ALPHA = 0.05     # GGX roughness of the per-face peer's specular lobe (a near-mirror coat)
+AD_FINAL_LR_RATIO = 0.1   # the atlas peer's learning rate at the end of its run, relative to its start
+AD_ALBEDOS = ("atlas", "face")
 
 
 @dataclass
@@ -46,18 +62,25 @@ class PeerConfig(Section):
 
     Attributes
     ----------
+    ad_albedo : the unknowns' layout: "atlas" (textures over a UV atlas, ``principled``) or
+        "face" (per-face mesh attributes, a blend of Lambertian and near-mirror).
     ad_time_budget : wall-clock seconds of Adam steps.
     ad_max_steps : at most this many steps (0: the time budget alone); the schedule (snapshots,
-        the envmap's refinement, the stop) follows whichever of time and steps is further along,
-        so a step-capped run under a generous budget is the same run on any machine.
+        the envmap's refinement, the learning rate, the stop) follows whichever of time and
+        steps is further along, so a step-capped run under a generous budget is the same run
+        on any machine.
     ad_resolution : the rendered width it aims at (the views are box-averaged by an integer factor).
     ad_spp : samples per pixel.
-    ad_learning_rate : Adam's learning rate.
+    ad_learning_rate : Adam's learning rate (at the start, for the atlas).
     ad_envmap_height : the final envmap height (it starts at half, doubling halfway).
-    ad_specular : fit a per-face specular albedo too (``blendbsdf`` of diffuse and a
-        near-mirror ``roughconductor``); False: Lambertian only.
+    ad_specular : fit a specular part too (the atlas's roughness texture; the per-face weight of
+        a near-mirror lobe); False: Lambertian only.
+    ad_texture_size : the atlas textures' side in texels.
+    ad_tv_weight : weight of the textures' total variation (the mean absolute difference of
+        neighbouring texels) in the atlas's loss, relative to the images' squared mean level.
     """
 
+    ad_albedo: str = "atlas"
     ad_time_budget: float = 60.0
     ad_max_steps: int = 0
     ad_resolution: int = 64
@@ -65,14 +88,19 @@ class PeerConfig(Section):
     ad_learning_rate: float = 0.02
     ad_envmap_height: int = 16
     ad_specular: bool = True
+    ad_texture_size: int = 512
+    ad_tv_weight: float = 1e-3
 
     def check(self):
         return [
+            (self.ad_albedo in AD_ALBEDOS, f"ad_albedo must be one of {', '.join(AD_ALBEDOS)}"),
             (self.ad_time_budget > 0, "ad_time_budget must be > 0"),
             (self.ad_max_steps >= 0, "ad_max_steps must be >= 0 (0: the time budget alone)"),
             (self.ad_resolution >= 8 and self.ad_spp >= 1 and self.ad_envmap_height >= 4,
              "ad_resolution must be >= 8, ad_spp >= 1 and ad_envmap_height >= 4"),
             (self.ad_learning_rate > 0, "ad_learning_rate must be > 0"),
+            (8 <= self.ad_texture_size <= 8192, "ad_texture_size must lie in [8, 8192]"),
+            (self.ad_tv_weight >= 0, "ad_tv_weight must be >= 0"),
         ]
 
 
@@ -97,9 +125,90 @@ def resolution_factor(width: int, height: int, target: int) -> int:
     return best
 
 
+@dataclass
+class Unknowns:
+    """The peer's set-up: its object, the parameter keys Adam updates with each key's range,
+    the texture keys its total variation regularises, and how the per-face diffuse albedo (F, 3),
+    specular albedo (F, 3) and other per-face values (name -> (F,)) are read from the parameters."""
+
+    shape: object
+    ranges: dict
+    textures: list
+    read: object
+
+
+def face_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
+    """Per-face albedo (and specular weight) as mesh attributes of the mesh."""
+    props = mi.Properties()
+    bsdf = {"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "face_albedo"}}
+    if c.ad_specular:   # plastic's constructor needs a texture mean, which mesh attributes lack
+        bsdf = {"type": "blendbsdf", "weight": {"type": "mesh_attribute", "name": "face_specular"},
+                "diffuse": bsdf, "gloss": {"type": "roughconductor", "material": "none", "alpha": AD_GLOSS_ALPHA}}
+    props["bsdf"] = mi.load_dict(bsdf)
+    shape = mitsuba_mesh(mesh, "object", props=props)
+    shape.add_attribute("face_albedo", 3, mi.Float(np.full(3 * mesh.num_faces, 0.5, np.float32)))
+    ranges = {"object.face_albedo": (1e-4, 1e4)}
+    if c.ad_specular:
+        shape.add_attribute("face_specular", 1, mi.Float(np.full(mesh.num_faces, 0.1, np.float32)))
+        ranges["object.face_specular"] = (1e-4, 1.0)
+
+    def read(values: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+        albedo = np.asarray(values["object.face_albedo"], dtype=np.float64).reshape(-1, 3)
+        if not c.ad_specular:
+            return albedo, np.zeros_like(albedo), {}
+        weight = np.clip(np.asarray(values["object.face_specular"], dtype=np.float64), 0.0, 1.0)
+        return albedo * (1.0 - weight)[:, None], np.repeat(weight[:, None], 3, axis=1), {}
+
+    return Unknowns(shape, ranges, [], read)
+
+
+def atlas_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
+    """Base-colour (and roughness) textures over an xatlas atlas of the mesh, ``principled``."""
+    vertices, faces, uv = uv_atlas(mesh)
+    size = c.ad_texture_size
+
+    def bitmap(channels: int, value: float) -> dict:
+        return {"type": "bitmap", "data": mi.TensorXf(np.full((size, size, channels), value, np.float32)),
+                "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp"}
+
+    if c.ad_specular:
+        bsdf = {"type": "principled", "base_color": bitmap(3, 0.5), "roughness": bitmap(1, 0.5),
+                "metallic": 0.0, "specular": 0.5}
+        ranges = {"object.bsdf.base_color.data": (1e-4, 1.0), "object.bsdf.roughness.data": (0.02, 1.0)}
+    else:
+        bsdf = {"type": "diffuse", "reflectance": bitmap(3, 0.5)}
+        ranges = {"object.bsdf.reflectance.data": (1e-4, 1.0)}
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf)
+    shape = mi.Mesh("object", len(vertices), len(faces), has_vertex_normals=False, has_vertex_texcoords=True,
+                    props=props)
+    params = mi.traverse(shape)
+    params["vertex_positions"] = mi.Float(vertices.astype(np.float32).ravel())
+    params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
+    params["vertex_texcoords"] = mi.Float(uv.astype(np.float32).ravel())
+    params.update()
+    colour = next(iter(ranges))
+
+    def read(values: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+        albedo = face_means(np.asarray(values[colour], dtype=np.float64), faces, uv)
+        extras = {}
+        if c.ad_specular:
+            extras["roughness"] = face_means(np.asarray(values["object.bsdf.roughness.data"], dtype=np.float64),
+                                             faces, uv)[:, 0]
+        return albedo, np.zeros_like(albedo), extras
+
+    return Unknowns(shape, ranges, list(ranges), read)
+
+
+def total_variation(dr, texture):
+    """Mean absolute difference of neighbouring texels of an (H, W, C) tensor, both axes."""
+    return (dr.mean(dr.abs(texture[1:, :, :] - texture[:-1, :, :]), axis=None)
+            + dr.mean(dr.abs(texture[:, 1:, :] - texture[:, :-1, :]), axis=None))
+
+
 @register_method
 class MitsubaAD(Method):
-    """Per-face albedo and an envmap fitted by differentiable rendering (see module doc)."""
+    """Textures (or per-face values) and an envmap fitted by differentiable rendering (see module doc)."""
 
     name = "mitsuba-ad"
     reports_residual = False   # its loss is on downsampled renders, not the observations' relative residual
@@ -119,34 +228,23 @@ class MitsubaAD(Method):
         refs = [mi.TensorXf(downsample(v, factor)) for v in views]
         level = float(np.mean([np.mean(v.rgb[v.alpha > 0.5]) if v.alpha is not None else np.mean(v.rgb)
                                for v in views]))
-        props = mi.Properties()
-        albedo_texture = {"type": "mesh_attribute", "name": "face_albedo"}
-        bsdf = {"type": "diffuse", "reflectance": albedo_texture}
-        if c.ad_specular:   # plastic's constructor needs a texture mean, which mesh attributes lack
-            bsdf = {"type": "blendbsdf", "weight": {"type": "mesh_attribute", "name": "face_specular"},
-                    "diffuse": bsdf, "gloss": {"type": "roughconductor", "material": "none", "alpha": AD_GLOSS_ALPHA}}
-        props["bsdf"] = mi.load_dict(bsdf)
-        shape = mitsuba_mesh(mesh, "object", props=props)
-        shape.add_attribute("face_albedo", 3, mi.Float(np.full(3 * mesh.num_faces, 0.5, np.float32)))
-        unknowns = ["object.face_albedo"]
-        if c.ad_specular:
-            shape.add_attribute("face_specular", 1, mi.Float(np.full(mesh.num_faces, 0.1, np.float32)))
-            unknowns.append("object.face_specular")
-        unknowns.append("emitter.data")
+        setup = (atlas_unknowns if c.ad_albedo == "atlas" else face_unknowns)(mi, mesh, c)
+        ranges = dict(setup.ranges, **{"emitter.data": (1e-4, 1e4)})
         height = max(2, c.ad_envmap_height // 2)
         env0 = np.full((height, 2 * height, 3), max(level / 0.5, 1e-3), np.float32)
         scene = mi.load_dict({
             "type": "scene", "embree_use_robust_intersections": True,
             "integrator": {"type": "prb", "max_depth": 2, "hide_emitters": True},
-            "object": shape,
+            "object": setup.shape,
             "emitter": {"type": "envmap", "bitmap": mi.Bitmap(env0)},
             "sensor": mitsuba_sensor(mi, scaled_camera(first, factor), c.ad_spp),
         })
         params = mi.traverse(scene)
         opt = mi.ad.Adam(lr=c.ad_learning_rate)
-        for key in unknowns:
+        for key in ranges:
             opt[key] = params[key]
         params.update(opt)
+        tv_weight = c.ad_tv_weight * level ** 2
         t0 = time.perf_counter()
         history = {"seconds": [], "loss": [], "envmap": []}
         snapshots, snapshot_seconds = [], []
@@ -156,7 +254,7 @@ class MitsubaAD(Method):
             elapsed = time.perf_counter() - t0
             progress = max(elapsed / c.ad_time_budget, step / c.ad_max_steps if c.ad_max_steps else 0.0)
             if progress >= next_snapshot:
-                snapshots.append(np.array(opt["object.face_albedo"], dtype=np.float64).reshape(-1, 3))
+                snapshots.append(setup.read(opt)[0])
                 snapshot_seconds.append(elapsed)
                 next_snapshot += 1 / 8
                 if history["loss"]:
@@ -170,25 +268,27 @@ class MitsubaAD(Method):
                 fine = np.repeat(np.repeat(coarse, 2, axis=0), 2, axis=1)
                 opt["emitter.data"] = mi.TensorXf(fine.astype(np.float32))
                 params.update(opt)
+            if c.ad_albedo == "atlas":
+                opt.set_learning_rate(c.ad_learning_rate * AD_FINAL_LR_RATIO ** min(progress, 1.0))
             view = step % len(views)
             params["sensor.to_world"] = mi.ScalarTransform4f(gl_to_mitsuba(views[view].camera.c2w))
             params.update()
             image = mi.render(scene, params, spp=c.ad_spp, seed=step)
             loss = dr.mean(dr.square(image[:, :, :3] - refs[view]), axis=None)
-            dr.backward(loss)
+            objective = loss
+            for key in setup.textures:
+                if tv_weight > 0:
+                    objective = objective + tv_weight * total_variation(dr, opt[key])
+            dr.backward(objective)
             opt.step()
-            for key in unknowns:
-                opt[key] = dr.clip(opt[key], 1e-4, 1.0 if key == "object.face_specular" else 1e4)
+            for key, (low, high) in ranges.items():
+                opt[key] = dr.clip(opt[key], low, high)
             params.update(opt)
             history["seconds"].append(time.perf_counter() - t0)
             history["loss"].append(float(np.array(loss).ravel()[0]))
             history["envmap"].append(list(np.array(opt["emitter.data"]).shape[:2]))
             step += 1
-        albedo = np.array(opt["object.face_albedo"], dtype=np.float64).reshape(-1, 3)
-        specular = np.zeros_like(albedo)
-        if c.ad_specular:   # the blend's weight w: (1 - w) x albedo is the Lambertian part
-            weight = np.clip(np.array(opt["object.face_specular"], dtype=np.float64), 0.0, 1.0)
-            albedo, specular = albedo * (1.0 - weight)[:, None], np.repeat(weight[:, None], 3, axis=1)
+        albedo, specular, extras = setup.read(opt)
         env = np.array(opt["emitter.data"], dtype=np.float64)[..., :3]
         radiance = sh.project_latlong(c.sh_order, env)
         pseudo = sh.phong_filtered(radiance, c.phong_exponent)
@@ -198,12 +298,14 @@ class MitsubaAD(Method):
         short = [] if step >= len(views) else [
             f"mitsuba-ad ran {step} step(s) in its budget ({c.ad_time_budget:g} s), fewer than the {len(views)} views: "
             "some views never entered the fit; raise ad_time_budget (--time-budget) or ad_max_steps"]
-        info = {"clusters": int(f), "steps": step, "method_warnings": short,
+        unknowns = sum(int(np.prod(np.array(opt[key]).shape)) for key in setup.ranges) + env.size
+        info = {"clusters": int(f), "steps": step, "method_warnings": short, "ad_albedo": c.ad_albedo,
+                **{f"{name}_median": float(np.median(values[observed])) for name, values in extras.items()
+                   if observed.any()},
                 "render_resolution": [first.width // factor, first.height // factor],
                 "ad_history": {"seconds": history["seconds"], "loss": history["loss"],
                                "snapshot_seconds": snapshot_seconds},
-                "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),
-                                       "unknowns": int(3 * f + (f if c.ad_specular else 0) + env.size)}}
+                "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)), "unknowns": int(unknowns)}}
         est = Estimate(np.where(observed[:, None], albedo * dc, 0.0), np.where(observed[:, None], specular * dc, 0.0),
                        pseudo,
                        np.where(observed, np.arange(f), -1), observed, self.name, c, info)

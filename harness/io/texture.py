@@ -14,28 +14,9 @@ import os
 import numpy as np
 from scipy import ndimage
 
-from estimator import Estimate, InputError, TriangleMesh, sh
+from estimator import Estimate, InputError, TriangleMesh, sh, uv_atlas
 from harness.io.exr import write_exr
 from reports.metrics import srgb_encode
-
-
-def uv_atlas(mesh: TriangleMesh, uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices (V', 3), faces (F, 3), uv (V', 2) in [0, 1]) with face order kept.
-
-    ``uv``: the mesh's own per-vertex texture coordinates (V, 2), used when given;
-    otherwise the mesh is unwrapped with xatlas, which splits vertices along seams
-    but keeps the faces and their order.
-    """
-    if uv is not None:
-        if uv.shape != (len(mesh.vertices), 2) or not np.all(np.isfinite(uv)):
-            raise InputError(f"texture coordinates must be finite (V, 2), got {uv.shape}")
-        return mesh.vertices, mesh.faces, np.asarray(uv, dtype=np.float64)
-    import xatlas
-
-    vmapping, indices, uvs = xatlas.parametrize(mesh.vertices.astype(np.float32), mesh.faces.astype(np.uint32))
-    if indices.shape != mesh.faces.shape or not np.array_equal(vmapping[indices], mesh.faces):
-        raise RuntimeError("xatlas changed the faces of the mesh")  # a bug, never bad input
-    return mesh.vertices[vmapping], indices.astype(np.int64), uvs.astype(np.float64)
 
 
 def bake(faces: np.ndarray, uv: np.ndarray, values: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:

@@ -24,8 +24,9 @@ WIRE_NAMES = (
     "min_brightness", "bandwidth", "split_bandwidth", "min_cluster_fraction", "recluster_rounds",
     "recluster_min_shading", "recluster_shading_percentile", "diffuse_quantile", "segment_min_shading",
     "tie_regions", "relabel_rounds", "relabel_free_ratio", "retinex_min_uniform_share",
-    "region_max_deviation", "region_max_drift", "ad_time_budget", "ad_max_steps", "ad_resolution", "ad_spp",
-    "ad_learning_rate", "ad_envmap_height", "ad_specular", "pose_rounds", "pose_folds", "auto_pose",
+    "region_max_deviation", "region_max_drift", "ad_albedo", "ad_time_budget", "ad_max_steps", "ad_resolution",
+    "ad_spp", "ad_learning_rate", "ad_envmap_height", "ad_specular", "ad_texture_size", "ad_tv_weight",
+    "pose_rounds", "pose_folds", "auto_pose",
     "view_gains",
 )
 

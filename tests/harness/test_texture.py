@@ -7,9 +7,10 @@ import OpenEXR
 import trimesh
 from PIL import Image
 
+from estimator import uv_atlas
 from harness.cli.main import main
 from harness.io.runs import read_run
-from harness.io.texture import bake, sample, srgb8, uv_atlas
+from harness.io.texture import bake, sample, srgb8
 from harness.scene.geometry import icosphere
 
 from .test_hostile_inputs import micro  # noqa: F401  (module fixture: dataset, run, report)
