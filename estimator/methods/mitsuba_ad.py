@@ -3,9 +3,11 @@ Mitsuba 3's differentiable renderer, registered as the method ``mitsuba-ad``.
 
 With ``ad_albedo = "atlas"`` (the default) it is set up as published baselines ship it: the
 mesh unwrapped into a UV atlas (xatlas, :mod:`estimator.core.atlas`), Mitsuba's ``principled``
-BSDF with a base-colour texture and a roughness texture over that atlas (``specular`` 0.5, a
-dielectric of index 1.5; metallic 0), and a lat-long environment map of radiance. The loss is
-the L2 image error plus ``ad_tv_weight`` times the total variation of the textures (scaled by
+BSDF with a base-colour texture over that atlas and one roughness (``specular`` 0.5, a
+dielectric of index 1.5; metallic 0), and a lat-long environment map of radiance (a roughness
+texture drifts further from the albedo: its texels fall towards a mirror while the base colour
+takes up the difference). The loss is
+the L2 image error plus ``ad_tv_weight`` times the total variation of the texture (scaled by
 the images' squared mean level, so that the weight does not depend on the exposure); Adam's
 learning rate decays exponentially to :data:`AD_FINAL_LR_RATIO` of ``ad_learning_rate`` over the
 run. A face's diffuse albedo is its area mean of the base colour (:func:`face_means`).
@@ -28,8 +30,7 @@ The light becomes the estimate's pseudo illumination as for every method: the en
 radiance projected to SH, filtered by the Phong lobe of ``phong_exponent``, in the unit-DC
 gauge. With per-face unknowns the estimate's diffuse albedo is (1 - w) x the fitted albedo
 and its specular albedo w (grey); the atlas's ``principled`` model has no Phong specular
-albedo, so its specular albedo is 0 and the median of the faces' mean roughness is kept in
-``info["roughness_median"]``.
+albedo, so its specular albedo is 0 and its roughness is kept in ``info["roughness"]``.
 """
 from __future__ import annotations
 
@@ -73,10 +74,10 @@ class PeerConfig(Section):
     ad_spp : samples per pixel.
     ad_learning_rate : Adam's learning rate (at the start, for the atlas).
     ad_envmap_height : the final envmap height (it starts at half, doubling halfway).
-    ad_specular : fit a specular part too (the atlas's roughness texture; the per-face weight of
-        a near-mirror lobe); False: Lambertian only.
-    ad_texture_size : the atlas textures' side in texels.
-    ad_tv_weight : weight of the textures' total variation (the mean absolute difference of
+    ad_specular : fit a specular part too (the atlas's ``principled`` roughness; the per-face
+        weight of a near-mirror lobe); False: Lambertian only.
+    ad_texture_size : the atlas texture's side in texels.
+    ad_tv_weight : weight of the texture's total variation (the mean absolute difference of
         neighbouring texels) in the atlas's loss, relative to the images' squared mean level.
     """
 
@@ -129,7 +130,8 @@ def resolution_factor(width: int, height: int, target: int) -> int:
 class Unknowns:
     """The peer's set-up: its object, the parameter keys Adam updates with each key's range,
     the texture keys its total variation regularises, and how the per-face diffuse albedo (F, 3),
-    specular albedo (F, 3) and other per-face values (name -> (F,)) are read from the parameters."""
+    specular albedo (F, 3) and other fitted values (name -> float, for ``info``) are read from
+    the parameters."""
 
     shape: object
     ranges: dict
@@ -163,7 +165,7 @@ def face_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
 
 
 def atlas_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
-    """Base-colour (and roughness) textures over an xatlas atlas of the mesh, ``principled``."""
+    """A base-colour texture over an xatlas atlas of the mesh and one roughness, ``principled``."""
     vertices, faces, uv = uv_atlas(mesh)
     size = c.ad_texture_size
 
@@ -172,9 +174,9 @@ def atlas_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
                 "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp"}
 
     if c.ad_specular:
-        bsdf = {"type": "principled", "base_color": bitmap(3, 0.5), "roughness": bitmap(1, 0.5),
+        bsdf = {"type": "principled", "base_color": bitmap(3, 0.5), "roughness": 0.5,
                 "metallic": 0.0, "specular": 0.5}
-        ranges = {"object.bsdf.base_color.data": (1e-4, 1.0), "object.bsdf.roughness.data": (0.02, 1.0)}
+        ranges = {"object.bsdf.base_color.data": (1e-4, 1.0), "object.bsdf.roughness.value": (0.02, 1.0)}
     else:
         bsdf = {"type": "diffuse", "reflectance": bitmap(3, 0.5)}
         ranges = {"object.bsdf.reflectance.data": (1e-4, 1.0)}
@@ -193,11 +195,10 @@ def atlas_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
         albedo = face_means(np.asarray(values[colour], dtype=np.float64), faces, uv)
         extras = {}
         if c.ad_specular:
-            extras["roughness"] = face_means(np.asarray(values["object.bsdf.roughness.data"], dtype=np.float64),
-                                             faces, uv)[:, 0]
+            extras["roughness"] = float(np.asarray(values["object.bsdf.roughness.value"]).ravel()[0])
         return albedo, np.zeros_like(albedo), extras
 
-    return Unknowns(shape, ranges, list(ranges), read)
+    return Unknowns(shape, ranges, [k for k in ranges if k.endswith(".data")], read)
 
 
 def total_variation(dr, texture):
@@ -300,8 +301,7 @@ class MitsubaAD(Method):
             "some views never entered the fit; raise ad_time_budget (--time-budget) or ad_max_steps"]
         unknowns = sum(int(np.prod(np.array(opt[key]).shape)) for key in setup.ranges) + env.size
         info = {"clusters": int(f), "steps": step, "method_warnings": short, "ad_albedo": c.ad_albedo,
-                **{f"{name}_median": float(np.median(values[observed])) for name, values in extras.items()
-                   if observed.any()},
+                **extras,
                 "render_resolution": [first.width // factor, first.height // factor],
                 "ad_history": {"seconds": history["seconds"], "loss": history["loss"],
                                "snapshot_seconds": snapshot_seconds},
