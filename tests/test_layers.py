@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # lowest first: a room may import its own modules and those of the rooms before it
 ROOMS = ("core", "rays", "model", "solvers", "light", "pipeline", "diagnostics", "methods", "config", "api",
          "__init__")
-THIRD_PARTY_IN_CORE = {"numpy", "scipy"}   # no renderer (mitsuba, drjit) below the rays room
+THIRD_PARTY_IN_CORE = {"numpy", "scipy", "xatlas"}   # array math, UV unwrapping; no renderer below rays
 
 
 def _module_name(path: Path) -> str:
