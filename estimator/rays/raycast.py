@@ -56,6 +56,7 @@ class RayCaster:
             "mesh": mitsuba_mesh(mesh),
         })
         self.scale = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+        self._centres: dict[tuple, np.ndarray] = {}   # pixel-centre face IDs of the last buffers' cameras
 
     def _rays(self, origins: np.ndarray, directions: np.ndarray, tmax: float | None = None):
         mi = self.mi
@@ -104,22 +105,40 @@ class RayCaster:
         With ``pure=True`` a pixel keeps its face only when the rays through its
         four corners hit that same face (-1 otherwise): such pixels are covered by
         one face alone, so their colour is that face's even in antialiased images.
+        The pixel-centre buffers of the last call are kept and reused for the same
+        cameras (the pose check and the observations trace the same views).
 
         Returns
         -------
-        list of (H, W) int64 arrays, -1 for background (or impure pixels).
+        list of (H, W) int64 arrays, -1 for background (or impure pixels); read-only
+        without ``pure``.
         """
-        grids = []
-        for cam in cameras:
-            grids.append(cam)
-            if pure:  # an (H+1) x (W+1) grid of rays through the pixel corners
-                grids.append(Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5,
-                                    cam.width + 1, cam.height + 1))
+        keys = [_camera_key(cam) for cam in cameras]
+        missing = [cam for cam, key in zip(cameras, keys) if key not in self._centres]
+        corners = [Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, cam.width + 1, cam.height + 1)
+                   for cam in cameras] if pure else []   # (H+1) x (W+1) grids of rays through the pixel corners
+        traced = self._trace(missing + corners, max_rays)
+        for buffer in traced[:len(missing)]:
+            buffer.flags.writeable = False   # kept for the next call: nobody may change it
+        fresh = dict(zip([_camera_key(cam) for cam in missing], traced[:len(missing)]))
+        centres = [self._centres[key] if key in self._centres else fresh[key] for key in keys]
+        self._centres = dict(zip(keys, centres))
+        if not pure:
+            return centres
+        out = []
+        for centre, corner in zip(centres, traced[len(missing):]):
+            same = ((corner[:-1, :-1] == centre) & (corner[1:, :-1] == centre)
+                    & (corner[:-1, 1:] == centre) & (corner[1:, 1:] == centre))
+            out.append(np.where(same, centre, -1))
+        return out
+
+    def _trace(self, grids: list[Camera], max_rays: int) -> list[np.ndarray]:
+        """(H, W) first-hit faces of each camera's pixel grid, in batches of up to ``max_rays`` rays."""
         buffers: list[np.ndarray] = []
         batch: list[Camera] = []
         for grid in grids + [None]:
             size = sum(g.width * g.height for g in batch)
-            if grid is None or (batch and size + grid.width * grid.height > max_rays):
+            if batch and (grid is None or size + grid.width * grid.height > max_rays):
                 rays = [g.pixel_rays() for g in batch]
                 ids = self.first_hit_faces(np.concatenate([o for o, _ in rays]), np.concatenate([d for _, d in rays]))
                 parts = np.split(ids, np.cumsum([g.width * g.height for g in batch])[:-1])
@@ -127,11 +146,10 @@ class RayCaster:
                 batch = []
             if grid is not None:
                 batch.append(grid)
-        if not pure:
-            return buffers
-        out = []
-        for centre, corners in zip(buffers[0::2], buffers[1::2]):
-            same = ((corners[:-1, :-1] == centre) & (corners[1:, :-1] == centre)
-                    & (corners[:-1, 1:] == centre) & (corners[1:, 1:] == centre))
-            out.append(np.where(same, centre, -1))
-        return out
+        return buffers
+
+
+def _camera_key(camera: Camera) -> tuple:
+    """What a camera's pixel rays depend on: its pose, intrinsics and size."""
+    return (np.asarray(camera.c2w, dtype=np.float64).tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
+            camera.width, camera.height)

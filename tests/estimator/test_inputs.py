@@ -79,6 +79,30 @@ def test_observations_are_per_face_means_of_pure_pixels():
     np.testing.assert_allclose(np.linalg.norm(obs.view_dir, axis=1), 1.0)
 
 
+def test_face_id_buffers_reuse_the_last_calls_centres(monkeypatch):
+    """The pose check and the observations trace the same views: the second call traces only
+    what changed (the corner rays; a moved camera) and gives what a fresh caster gives."""
+    mesh = sphere(1)
+    cams = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 40, 32) for eye in ([0, 0, 4], [3, 1, 2])]
+    fresh_pure = RayCaster(mesh).face_id_buffers(cams, pure=True, max_rays=1500)
+    caster = RayCaster(mesh)
+    traced = []
+    original = caster.first_hit_faces
+    monkeypatch.setattr(caster, "first_hit_faces", lambda o, d: traced.append(len(o)) or original(o, d))
+    centres = caster.face_id_buffers(cams, max_rays=1500)
+    assert sum(traced) == 2 * 40 * 32 and not centres[0].flags.writeable
+    traced.clear()
+    pure = caster.face_id_buffers(cams, pure=True, max_rays=1500)
+    assert sum(traced) == 2 * 41 * 33                                # the corners alone
+    for a, b in zip(pure, fresh_pure):
+        np.testing.assert_array_equal(a, b)
+    moved = Camera.from_fov(look_at([0, 0.5, 4], [0, 0, 0]), 30, 40, 32)
+    traced.clear()
+    again = caster.face_id_buffers([cams[0], moved], max_rays=1500)
+    assert sum(traced) == 40 * 32 and again[0] is centres[0]         # the moved camera alone
+    np.testing.assert_array_equal(again[1], RayCaster(mesh).face_id_buffer(moved))
+
+
 def test_median_colour_matches_numpy():
     rng = np.random.default_rng(0)
     face = rng.integers(0, 7, 60)

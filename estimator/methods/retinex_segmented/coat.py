@@ -25,6 +25,16 @@ def coat_map_fit(ctx: FitContext) -> coat_map.ReflectedLight:
     return fits.coat_map
 
 
+def through_coat(ctx: FitContext) -> Shading:
+    """The diffuse shading through the coat (the cosine weighted by the coat's entry
+    transmission 1 - F, as Mitsuba's ``plastic``), made once per solve."""
+    fits, prep = ctx.fits, ctx.prep
+    if fits.through_coat is None:
+        fits.through_coat = ctx.model.diffuse_matrix(prep.data.mesh, prep.sampling, prep.visibility,
+                                                     coat_ior=ctx.config.coat_ior)
+    return Shading(fits.through_coat)
+
+
 def coat_map_candidate(ctx: FitContext, regions: bool) -> coat_map.ReflectedLight | None:
     """The coat's map when this fit may take its light: ``reflected_light`` on (and
     ``reflected_regions`` for an object of uniform regions) and the map determined (at least
@@ -79,12 +89,12 @@ def map_light(ctx: FitContext, fitted: coat_map.ReflectedLight, radiance: np.nda
     its peak out without a sun would lose that light). Returns the light (M', 3) (unit sky DC,
     the sun's irradiance last when kept) and its shading."""
     c, prep, model = ctx.config, ctx.prep, ctx.model
-    through_coat = Shading(model.diffuse_matrix(prep.data.mesh, prep.sampling, prep.visibility, coat_ior=c.coat_ior))
+    coated = through_coat(ctx)
     sky_map, direction = fitted.sky_and_sun()
     sky = model.unknown_from_radiance(sh.project_latlong(c.sh_order, sky_map))
     sky = unit_dc(sky)[0]
     sun_column = sun.sun_shading(prep.data.mesh, prep.caster, direction, c.coat_ior)
-    sky_shading = through_coat.columns @ sky                                    # (F, 3)
+    sky_shading = coated.columns @ sky                                    # (F, 3)
     with_sun = np.zeros(3)
     for k in range(3):   # one unknown per channel: the sun's irradiance over the sky's
         pair = np.stack([sky_shading[:, k], sun_column], axis=1)
@@ -95,9 +105,9 @@ def map_light(ctx: FitContext, fitted: coat_map.ReflectedLight, radiance: np.nda
                                      edge_fit.edge_residuals(radiance, np.maximum(both, 1e-300), ctx.edges, ctx.usable))
     if np.all(with_sun > 0) and ratio <= c.reflected_sun_max_ratio:
         found = sun.Sun(direction, ratio, 3, c.coat_ior)   # 3 evaluations: one fit per channel
-        return np.vstack([sky, with_sun[None]]), through_coat.with_sun(found, sun_column)
+        return np.vstack([sky, with_sun[None]]), coated.with_sun(found, sun_column)
     whole = model.unknown_from_radiance(fitted.sh(c.sh_order))
-    return unit_dc(whole)[0], through_coat
+    return unit_dc(whole)[0], coated
 
 
 def coated_diffuse(ctx: FitContext, edges: Hypothesis) -> tuple[np.ndarray, Shading] | None:
@@ -114,7 +124,7 @@ def coated_diffuse(ctx: FitContext, edges: Hypothesis) -> tuple[np.ndarray, Shad
     if not fitted.determined:
         return None
     mesh = prep.data.mesh
-    shading = Shading(ctx.model.diffuse_matrix(mesh, prep.sampling, prep.visibility, coat_ior=c.coat_ior))
+    shading = through_coat(ctx)
     if edges.shading.sun is not None:
         found = edges.found
         found = sun.Sun(found.direction, found.cost_ratio, found.evaluations, c.coat_ior)
