@@ -214,7 +214,7 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
             a_c, y_c, denominator = _project_off_faces(a, rgb[:, c], b, weights)
             normal = (a_c.T @ sparse.diags(weights) @ a_c).toarray()
             level = max(np.trace(normal) / cells, 1e-300)
-            # symmetric positive definite (the ridge keeps it so): Cholesky, about half LU's time
+            # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
             system = normal + level * (smoothness * smooth + 1e-9 * np.eye(cells))
             light[:, c] = linalg.cho_solve(linalg.cho_factor(system, check_finite=False), a_c.T @ (weights * y_c),
                                            check_finite=False)

@@ -6,11 +6,11 @@ mesh unwrapped into a UV atlas (xatlas, :mod:`estimator.core.atlas`), Mitsuba's 
 BSDF with a base-colour texture over that atlas and one roughness (``specular`` 0.5, a
 dielectric of index 1.5; metallic 0), and a lat-long environment map of radiance (a roughness
 texture drifts further from the albedo: its texels fall towards a mirror while the base colour
-takes up the difference). The loss is
-the L2 image error plus ``ad_tv_weight`` times the total variation of the texture (scaled by
-the images' squared mean level, so that the weight does not depend on the exposure); Adam's
-learning rate decays exponentially to :data:`AD_FINAL_LR_RATIO` of ``ad_learning_rate`` over the
-run. A face's diffuse albedo is its area mean of the base colour (:func:`face_means`).
+takes up the difference). The loss is the L2 image error plus ``ad_tv_weight`` times the
+texture's total variation (scaled by the images' squared mean level, so that the weight does
+not depend on the exposure); Adam's learning rate decays exponentially to
+:data:`AD_FINAL_LR_RATIO` of ``ad_learning_rate`` over the run. A face's diffuse albedo is its
+area mean of the base colour (:func:`estimator.core.atlas.face_means`).
 
 With ``ad_albedo = "face"`` the unknowns are a per-face diffuse albedo and a per-face specular
 weight (``mesh_attribute``s: a ``blendbsdf`` of a Lambertian ``diffuse`` and a near-mirror
@@ -35,6 +35,7 @@ albedo, so its specular albedo is 0 and its roughness is kept in ``info["roughne
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,7 +64,7 @@ class PeerConfig(Section):
 
     Attributes
     ----------
-    ad_albedo : the unknowns' layout: "atlas" (textures over a UV atlas, ``principled``) or
+    ad_albedo : the unknowns' layout: "atlas" (a texture over a UV atlas, ``principled``) or
         "face" (per-face mesh attributes, a blend of Lambertian and near-mirror).
     ad_time_budget : wall-clock seconds of Adam steps.
     ad_max_steps : at most this many steps (0: the time budget alone); the schedule (snapshots,
@@ -134,9 +135,9 @@ class Unknowns:
     the parameters."""
 
     shape: object
-    ranges: dict
-    textures: list
-    read: object
+    ranges: dict[str, tuple[float, float]]
+    textures: list[str]
+    read: Callable[[dict], tuple[np.ndarray, np.ndarray, dict]]
 
 
 def face_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
@@ -277,9 +278,8 @@ class MitsubaAD(Method):
             image = mi.render(scene, params, spp=c.ad_spp, seed=step)
             loss = dr.mean(dr.square(image[:, :, :3] - refs[view]), axis=None)
             objective = loss
-            for key in setup.textures:
-                if tv_weight > 0:
-                    objective = objective + tv_weight * total_variation(dr, opt[key])
+            for key in setup.textures if tv_weight > 0 else []:
+                objective = objective + tv_weight * total_variation(dr, opt[key])
             dr.backward(objective)
             opt.step()
             for key, (low, high) in ranges.items():
