@@ -203,8 +203,8 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
     a = sparse.diags(fresnel) @ bilinear_rows(mirror, height, width)          # (N, H*W)
     b = sparse.csr_matrix((transmit, (np.arange(rows), face)), shape=(rows, n_faces))
     smooth = map_differences(height, width)
-    smooth = (smooth.T @ smooth).toarray()
     cells = height * width
+    ridge = smoothness * (smooth.T @ smooth).toarray() + 1e-9 * np.eye(cells)   # (cells, cells), per unit level
     light = np.zeros((cells, 3))
     diffuse = np.full((n_faces, 3), np.nan)
     explained = np.zeros(3)
@@ -212,12 +212,11 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
         weights = np.ones(rows)
         for _ in range(max(rounds, 1)):
             a_c, y_c, denominator = _project_off_faces(a, rgb[:, c], b, weights)
-            normal = (a_c.T @ sparse.diags(weights) @ a_c).toarray()
-            level = max(np.trace(normal) / cells, 1e-300)
+            system = (a_c.T @ sparse.diags(weights) @ a_c).toarray()
+            system += max(np.trace(system) / cells, 1e-300) * ridge
             # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
-            system = normal + level * (smoothness * smooth + 1e-9 * np.eye(cells))
-            light[:, c] = linalg.cho_solve(linalg.cho_factor(system, check_finite=False), a_c.T @ (weights * y_c),
-                                           check_finite=False)
+            light[:, c] = linalg.cho_solve(linalg.cho_factor(system, overwrite_a=True, check_finite=False),
+                                           a_c.T @ (weights * y_c), check_finite=False)
             residual = y_c - a_c @ light[:, c]
             weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual), floor=1e-12))
         total = np.sum(weights * y_c ** 2)
