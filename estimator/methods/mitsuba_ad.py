@@ -183,13 +183,7 @@ def atlas_unknowns(mi, mesh: TriangleMesh, c: PeerConfig) -> Unknowns:
         ranges = {"object.bsdf.reflectance.data": (1e-4, 1.0)}
     props = mi.Properties()
     props["bsdf"] = mi.load_dict(bsdf)
-    shape = mi.Mesh("object", len(vertices), len(faces), has_vertex_normals=False, has_vertex_texcoords=True,
-                    props=props)
-    params = mi.traverse(shape)
-    params["vertex_positions"] = mi.Float(vertices.astype(np.float32).ravel())
-    params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
-    params["vertex_texcoords"] = mi.Float(uv.astype(np.float32).ravel())
-    params.update()
+    shape = mitsuba_mesh(TriangleMesh(vertices, faces), "object", props=props, uv=uv)
     colour = next(iter(ranges))
 
     def read(values: dict) -> tuple[np.ndarray, np.ndarray, dict]:

@@ -13,19 +13,21 @@ from ..core.errors import InputError
 from . import backend
 
 
-def mitsuba_mesh(mesh: TriangleMesh, name: str = "mesh", props=None):
+def mitsuba_mesh(mesh: TriangleMesh, name: str = "mesh", props=None, uv: np.ndarray | None = None):
     """A ``mi.Mesh`` with the vertices and faces of ``mesh`` in its face order.
 
     No vertex normals: Mitsuba shades with the geometric (flat) face normals.
-    ``props`` is an optional ``mi.Properties`` (to attach a BSDF).
+    ``props`` is an optional ``mi.Properties`` (to attach a BSDF); ``uv`` optional per-vertex
+    texture coordinates (V, 2) (a UV atlas's, :func:`estimator.core.atlas.uv_atlas`).
     """
     mi = backend.set_variant()
-    args = (name, mesh.vertices.shape[0], mesh.num_faces)
-    m = mi.Mesh(*args, has_vertex_normals=False, has_vertex_texcoords=False,
-                props=props) if props is not None else mi.Mesh(*args, has_vertex_normals=False)
+    m = mi.Mesh(name, mesh.vertices.shape[0], mesh.num_faces, has_vertex_normals=False,
+                has_vertex_texcoords=uv is not None, **({} if props is None else {"props": props}))
     params = mi.traverse(m)
     params["vertex_positions"] = mi.Float(mesh.vertices.astype(np.float32).ravel())
     params["faces"] = mi.UInt32(mesh.faces.astype(np.uint32).ravel())
+    if uv is not None:
+        params["vertex_texcoords"] = mi.Float(np.asarray(uv, dtype=np.float32).ravel())
     params.update()
     return m
 
@@ -114,14 +116,15 @@ class RayCaster:
         without ``pure``.
         """
         keys = [_camera_key(cam) for cam in cameras]
-        missing = [cam for cam, key in zip(cameras, keys) if key not in self._centres]
+        missing = {key: cam for cam, key in zip(cameras, keys) if key not in self._centres}
         corners = [Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, cam.width + 1, cam.height + 1)
                    for cam in cameras] if pure else []   # (H+1) x (W+1) grids of rays through the pixel corners
-        traced = self._trace(missing + corners, max_rays)
-        for buffer in traced[:len(missing)]:
+        traced = self._trace(list(missing.values()) + corners, max_rays)
+        known = dict(self._centres)
+        for key, buffer in zip(missing, traced):
             buffer.flags.writeable = False   # kept for the next call: nobody may change it
-        fresh = dict(zip([_camera_key(cam) for cam in missing], traced[:len(missing)]))
-        centres = [self._centres[key] if key in self._centres else fresh[key] for key in keys]
+            known[key] = buffer
+        centres = [known[key] for key in keys]
         self._centres = dict(zip(keys, centres))
         if not pure:
             return centres
