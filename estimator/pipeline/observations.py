@@ -22,7 +22,11 @@ class ObservationConfig(Section):
         60 degrees of the normal). Far from the normal the Phong lobe around r is cut by the
         horizon, which the mirror term ignores.
     min_pixels : pixels a face must cover in a view to give an observation.
-    pure_pixels : use only pixels covered by one face alone (the corner rays agree).
+    pure_pixels : observe a face through the pixels it alone covers (the corner rays agree).
+        Where such pixels resolve under half of the faces that pixel centres hit (faces
+        smaller than a pixel, as on a dense scan), the faces they miss are observed through
+        the pixels whose centre ray hits them, each such pixel's colour the footprint's mean
+        over that face and its neighbours. Off: every face through its pixel centres.
     min_coverage : a pixel is used only when the object covers at least this share of it
         (alpha); 0.999 keeps whole pixels and drops silhouette edges, whose colour mixes
         object and background.
@@ -58,6 +62,9 @@ class Observations:
     num_faces, num_views : int
     rejected : (num_views,) int64 object pixels dropped per view as negative beyond noise.
     view : (N,) int64 view of each row (None when unknown).
+    unresolved : (num_faces,) bool, faces observed through their pixel centres (a footprint's
+        mean over them and their neighbours) because pure pixels resolve too few faces
+        (:func:`gather_observations`); None when no face is, or without ``pure_pixels``.
     """
 
     face: np.ndarray
@@ -67,11 +74,12 @@ class Observations:
     num_views: int
     rejected: np.ndarray | None = None
     view: np.ndarray | None = None
+    unresolved: np.ndarray | None = None
 
     def subset(self, keep: np.ndarray) -> "Observations":
         """The rows where ``keep`` (N,) is true."""
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
-                            self.rejected, None if self.view is None else self.view[keep])
+                            self.rejected, None if self.view is None else self.view[keep], self.unresolved)
 
     def observed_faces(self) -> np.ndarray:
         """(F,) bool: faces with at least one row."""
@@ -104,6 +112,22 @@ def _check_exposure_levels(views: list[View], levels: np.ndarray) -> None:
                          "dynamic range): a wrong scale or a corrupt image; fix it or drop it from the dataset")
 
 
+def _face_means(ids: np.ndarray, valid: np.ndarray, rgb: np.ndarray, num_faces: int, min_pixels: int,
+                skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The faces (K,) int64 covered by at least ``min_pixels`` of the ``valid`` pixels in the
+    face-ID buffer ``ids`` (P,) (and not in ``skip`` (F,) bool), with the mean colour (K, 3)
+    of ``rgb`` (P, 3) over those pixels."""
+    keep = valid & (ids >= 0)
+    ids, colours = ids[keep], rgb[keep].astype(np.float64)
+    counts = np.bincount(ids, minlength=num_faces)
+    sums = np.stack([np.bincount(ids, colours[:, c], minlength=num_faces) for c in range(3)], axis=1)
+    use = counts >= max(min_pixels, 1)
+    if skip is not None:
+        use &= ~skip
+    faces = np.nonzero(use)[0]
+    return faces, sums[faces] / counts[faces, None]
+
+
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = ObservationConfig.min_pixels,
                         min_alpha: float = ObservationConfig.min_coverage,
                         pure_pixels: bool = ObservationConfig.pure_pixels,
@@ -111,9 +135,14 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     """Face-ID buffers by primary rays through pixel centres, then per-face mean colours.
 
     Occlusion is exact: a pixel belongs to the first face its centre ray hits.
-    With ``pure_pixels`` only pixels whose four corner rays hit the same face
-    are used, so antialiased pixels that mix two faces' albedos do not bias
-    small or thin regions. Pixels with coverage ``alpha < min_alpha``
+    With ``pure_pixels`` a face is observed through the pixels whose four corner rays
+    hit it alone, so antialiased pixels that mix two faces' albedos do not bias small or
+    thin regions. When such pixels cover under half of the faces that pixel centres hit,
+    the images resolve no face (a mesh denser than its photos): the faces without a pure
+    pixel are then observed through the pixels whose centre ray hits them, a footprint's
+    mean over the face and its neighbours, which is all the images resolve there (a few
+    thin faces of a coarser mesh stay unobserved rather than take a neighbour's colour).
+    Pixels with coverage ``alpha < min_alpha``
     (silhouette edges) are skipped, and faces covered by fewer than
     ``min_pixels`` usable pixels in a view give no row. Pixels with a channel below
     ``-negative_tolerance`` x the view's 99th-percentile object value are not light
@@ -121,12 +150,12 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     """
     mesh: TriangleMesh = caster.mesh
     f = mesh.num_faces
-    centroids = mesh.centroids
-    parts, rejected, levels = [], [], []
-    buffers = caster.face_id_buffers([v.camera for v in views], pure=pure_pixels)
-    for index, (view, ids) in enumerate(zip(views, buffers)):
-        ids = ids.ravel()
-        valid = ids >= 0
+    cameras = [v.camera for v in views]
+    pure_ids = caster.face_id_buffers(cameras, pure=True) if pure_pixels else [None] * len(views)
+    centre_ids = caster.face_id_buffers(cameras)   # the caster's kept buffers: traced once
+    usable, rejected, levels = [], [], []
+    for view, ids in zip(views, centre_ids):
+        valid = ids.ravel() >= 0
         if view.alpha is not None:
             valid &= view.alpha.ravel() >= min_alpha
         rgb = view.rgb.reshape(-1, 3)
@@ -134,15 +163,30 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         levels.append(level)
         negative = valid & np.any(rgb < -negative_tolerance * max(level, 1e-30), axis=1)
         rejected.append(int(negative.sum()))
-        valid &= ~negative
-        ids = ids[valid]
-        rgb = rgb[valid].astype(np.float64)
-        counts = np.bincount(ids, minlength=f)
-        sums = np.stack([np.bincount(ids, rgb[:, c], minlength=f) for c in range(3)], axis=1)
-        faces = np.nonzero(counts >= max(min_pixels, 1))[0]
-        to_cam = view.camera.center[None] - centroids[faces]
+        usable.append(valid & ~negative)
+    # the pure pixels' rows; where they resolve under half of the faces a pixel centre hits
+    # (faces smaller than a pixel: a dense scan), the other faces' rows through their centres
+    pure_rows = [None if p is None else _face_means(p.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels)
+                 for p, valid, view in zip(pure_ids, usable, views)]
+    covered = np.zeros(f, dtype=bool)
+    hit = np.zeros(f, dtype=bool)
+    for row, ids, valid in zip(pure_rows, centre_ids, usable):
+        hit[ids.ravel()[valid]] = True
+        if row is not None:
+            covered[row[0]] = True
+    footprint = ~covered if not pure_pixels or 2 * covered.sum() < hit.sum() else np.zeros(f, dtype=bool)
+    parts = []
+    for index, (view, ids, valid, row) in enumerate(zip(views, centre_ids, usable, pure_rows)):
+        if footprint.any():   # the footprint rows, and the pure rows (none without pure_pixels)
+            faces, means = _face_means(ids.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels, skip=~footprint)
+            if row is not None:
+                order = np.argsort(np.concatenate([row[0], faces]), kind="stable")
+                faces, means = np.concatenate([row[0], faces])[order], np.concatenate([row[1], means])[order]
+        else:
+            faces, means = row
+        to_cam = view.camera.center[None] - mesh.centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
-        parts.append((faces, sums[faces] / counts[faces, None], to_cam, np.full(len(faces), index)))
+        parts.append((faces, means, to_cam, np.full(len(faces), index)))
     clear = [view.name for view in views if view.alpha is not None and not np.any(view.alpha >= min_alpha)]
     if clear:
         raise InputError(f"{len(clear)} view(s) are fully transparent (alpha below {min_alpha} everywhere): "
@@ -156,5 +200,6 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
     _check_exposure_levels(views, np.array(levels))
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
+    unresolved = footprint & (np.bincount(face, minlength=f) > 0)
     return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
-                        view_index.astype(np.int64))
+                        view_index.astype(np.int64), unresolved if pure_pixels and unresolved.any() else None)

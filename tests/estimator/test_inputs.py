@@ -79,6 +79,43 @@ def test_observations_are_per_face_means_of_pure_pixels():
     np.testing.assert_allclose(np.linalg.norm(obs.view_dir, axis=1), 1.0)
 
 
+def _means(ids: np.ndarray, image: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(K, 3) mean of ``image`` over the pixels of each of ``faces`` in the face-ID buffer ``ids``."""
+    hit = ids.ravel() >= 0
+    flat, rgb = ids.ravel()[hit], image.reshape(-1, 3)[hit]
+    counts = np.bincount(flat)[faces]
+    sums = np.stack([np.bincount(flat, rgb[:, c])[faces] for c in range(3)], axis=1)
+    return sums / counts[:, None]
+
+
+@pytest.mark.parametrize("size, dense", [(40, True), (160, False)])
+def test_faces_smaller_than_a_pixel_are_observed_through_their_pixel_centres(size, dense):
+    """Where pure pixels resolve under half of the faces pixel centres hit (a mesh denser than
+    its photos), a face that covers no whole pixel is observed through its pixel centres; a
+    face that covers one keeps the mean of its pure pixels alone. Where they resolve most
+    faces, the rest stay unobserved."""
+    mesh = sphere(3)                                                 # 1,280 faces
+    caster = RayCaster(mesh)
+    cam = Camera.from_fov(look_at([0, 0, 4], [0, 0, 0]), 30, size, size)
+    ids = caster.face_id_buffer(cam)
+    pure = caster.face_id_buffers([cam], pure=True)[0]
+    hit, covered = np.unique(ids[ids >= 0]), np.unique(pure[pure >= 0])
+    assert (2 * len(covered) < len(hit)) == dense and len(covered) < len(hit)
+    image = np.random.default_rng(0).random((size, size, 3)).astype(np.float32)   # as a View holds it
+    obs = gather_observations(caster, [View("v", cam, image)])
+    np.testing.assert_array_equal(obs.face, hit if dense else covered)
+    through_pure = np.isin(obs.face, covered)
+    np.testing.assert_allclose(obs.rgb[through_pure], _means(pure, image, obs.face[through_pure]), rtol=1e-12)
+    np.testing.assert_allclose(obs.rgb[~through_pure], _means(ids, image, obs.face[~through_pure]), rtol=1e-12)
+    if dense:
+        np.testing.assert_array_equal(np.nonzero(obs.unresolved)[0], np.setdiff1d(hit, covered))
+    else:
+        assert obs.unresolved is None
+    centres = gather_observations(caster, [View("v", cam, image)], pure_pixels=False)
+    np.testing.assert_allclose(centres.rgb, _means(ids, image, hit), rtol=1e-12)
+    assert centres.unresolved is None
+
+
 def test_face_id_buffers_reuse_the_last_calls_centres(monkeypatch):
     """The pose check and the observations trace the same views: the second call traces only
     what changed (the corner rays; a moved camera) and gives what a fresh caster gives."""
