@@ -211,6 +211,9 @@ def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | 
     timings["observations"] = time.perf_counter() - t
     say(f"observations: {len(all_obs.face)} (face, view) pairs, {len(obs.face)} kept "
         f"(view within acos({config.min_cos_view}) of the normal)")
+    if all_obs.unresolved is not None:
+        say(f"{int(all_obs.unresolved.sum())} faces are smaller than the pixels that see them: observed through "
+            "the pixels whose centre they hold (a footprint's mean over them and their neighbours)")
     if streams(data, config, obs):
         if not streaming:
             raise InputError(

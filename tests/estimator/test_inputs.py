@@ -116,6 +116,19 @@ def test_faces_smaller_than_a_pixel_are_observed_through_their_pixel_centres(siz
     assert centres.unresolved is None
 
 
+def test_an_estimate_counts_the_faces_observed_through_pixel_centres():
+    mesh = sphere(3)
+    caster = RayCaster(mesh)
+    cams = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 40, 40) for eye in ([0, 0, 4], [0, 4, 0.1])]
+    hit, covered = np.zeros(mesh.num_faces, bool), np.zeros(mesh.num_faces, bool)
+    for ids, pure in zip(caster.face_id_buffers(cams), caster.face_id_buffers(cams, pure=True)):
+        hit[ids[ids >= 0]] = covered[pure[pure >= 0]] = True
+    views = [View(f"v{i}", cam, np.full((40, 40, 3), 0.5)) for i, cam in enumerate(cams)]
+    est = estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50))
+    assert est.info["unresolved_faces"] == (hit & ~covered).sum() > 0
+    assert np.all(est.observed[hit])
+
+
 def test_face_id_buffers_reuse_the_last_calls_centres(monkeypatch):
     """The pose check and the observations trace the same views: the second call traces only
     what changed (the corner rays; a moved camera) and gives what a fresh caster gives."""
