@@ -16,7 +16,7 @@ WIRE_NAMES = (
     "directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "negative_tolerance",
     "dense_rows", "light_faces", "iterations", "tol", "components", "lm_damping_start", "lm_damping_raise",
     "lm_damping_lower", "lm_damping_max", "robust_loss", "robust_rounds", "glint_ratio", "segment_threshold",
-    "uniform_spread", "albedo_prior", "retinex_quantile", "retinex_ridge", "retinex_iterations",
+    "uniform_spread", "albedo_prior", "retinex_quantile", "retinex_ridge", "retinex_iterations", "retinex_max_edges",
     "sun_min_gain", "coat_correction", "coat_per_region", "coat_ior", "coat_order", "coat_min_share",
     "coat_max_negative",
     "reflected_light", "reflected_regions", "reflected_sun_max_ratio",

@@ -41,6 +41,23 @@ def test_recovers_the_shading_up_to_scale(with_regions):
         assert region_albedo.shape == (0, 3)
 
 
+@pytest.mark.parametrize("max_edges", [40, 300])
+def test_a_random_subset_of_the_edges_recovers_the_light_and_every_regions_albedo(max_edges):
+    """Beyond ``max_edges`` the fit draws that many edges (of 1,104) and their faces' region
+    rows; a region none of whose faces is drawn (a lone face) takes its median under the light."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    labels, albedo = labels.copy(), albedo.copy()
+    labels[0], albedo[0] = 2, [0.3, 0.3, 0.3]                  # a third region of one face
+    radiance = albedo * (c_matrix @ light)
+    usable = np.ones(len(radiance), dtype=bool)
+    fit, region_albedo = log_shading_fit(radiance, c_matrix, edges, usable, labels, max_edges=max_edges)
+    full, _ = log_shading_fit(radiance, c_matrix, edges, usable, labels)
+    np.testing.assert_allclose(fit, light / light[0], rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(fit, full, rtol=1e-4, atol=1e-5)
+    truth = albedo[[labels.tolist().index(r) for r in range(3)]]
+    np.testing.assert_allclose(region_albedo / region_albedo[0], truth / truth[0], rtol=1e-4)
+
+
 def test_least_squares_is_biased_by_albedo_edges():
     """Without a robust loss the boundary's jump pulls the light: the robust loss is what
     lets albedo edges go."""

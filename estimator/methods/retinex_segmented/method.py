@@ -153,7 +153,8 @@ class RetinexSegmented(Method):
         if not usable.any():
             raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
         ctx = FitContext(prep, c, self.model, self.loss, fits, mesh.face_adjacency, usable,
-                         dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations))
+                         dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
+                              max_edges=c.retinex_max_edges))
         if c.interreflection:
             ctx.fit["indirect"] = ctx.extra = indirect.indirect_shading(
                 prep.caster, prep.sampling, prep.visibility, np.where(usable[:, None], radiance, 0.0))
