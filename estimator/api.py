@@ -27,7 +27,7 @@ DEFAULT_METHOD = "retinex-segmented"
 
 def estimate(data: MultiViewData, method: str | None = None, config: EstimatorConfig | None = None,
              known_sh: np.ndarray | None = None, known_radiance: np.ndarray | None = None, log=None,
-             exponent_candidates: tuple[float, ...] | None = None) -> Estimate:
+             exponent_candidates: tuple[float, ...] | None = None, caster: RayCaster | None = None) -> Estimate:
     """Run a registered method on in-memory data (the estimator's one entry point).
 
     Parameters
@@ -40,12 +40,18 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         (observations and shadow function computed once) and keep the lowest final
         residual. Only models that depend on the exponent qualify
         (``specular_model='lobe'`` or ``diffuse_light='defiltered'``).
+    caster : ray queries of ``data.mesh`` already built (None: built here), whose face-ID
+        buffers of cameras it has traced before are reused (the pose refinement passes its own).
     """
     config = config or EstimatorConfig()
     cls = get_method(method or DEFAULT_METHOD)
     t0 = time.perf_counter()
     poses, rounds, offsets = None, config.pose_rounds, None
-    caster = RayCaster(data.mesh, config.variant)   # one for the pose check, the refinement and the solve
+    if caster is not None and caster.mesh is not data.mesh:
+        raise InputError("estimate: the caster was built for another mesh than data.mesh")
+    # one for the pose check, the refinement's held-out estimates and the solve: each view's
+    # face-ID buffers are traced once per camera
+    caster = caster or RayCaster(data.mesh, config.variant)
     if rounds == 0 and config.auto_pose > 0 and len(data.views) >= 2:
         offsets = pose.outline_offsets(data, caster)
         if np.nanmax(offsets, initial=0.0) > config.auto_pose:
@@ -55,7 +61,7 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     if rounds > 0:
         fixed = replace(config, pose_rounds=0, auto_pose=0.0)
         data, poses = pose.refine_poses(
-            data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates),
+            data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates, caster),
             rounds, min(config.pose_folds, len(data.views)), caster, log)
     pose_seconds = time.perf_counter() - t0
     prep = prepare(data, config, log, cls.name, cls.streams, caster)

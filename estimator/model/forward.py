@@ -24,13 +24,17 @@ class Predictor:
     ----------
     mesh : TriangleMesh (the estimate's face order).
     estimate : Estimate.
+    caster : ray queries of ``mesh`` already built (None: built here); the face-ID buffers
+        of the cameras it has traced are reused.
     """
 
-    def __init__(self, mesh: TriangleMesh, estimate: Estimate):
+    def __init__(self, mesh: TriangleMesh, estimate: Estimate, caster: RayCaster | None = None):
         if estimate.diffuse.shape[0] != mesh.num_faces:
             raise InputError(f"the estimate has {estimate.diffuse.shape[0]} faces, the mesh {mesh.num_faces}")
+        if caster is not None and caster.mesh is not mesh:
+            raise InputError("Predictor: the caster was built for another mesh")
         self.mesh, self.estimate, self.model = mesh, estimate, estimate.model
-        self.caster = RayCaster(mesh, estimate.config.variant)
+        self.caster = caster or RayCaster(mesh, estimate.config.variant)
         self.sampling = sphere_sampling(estimate.config.directions)
         self.visibility = compute_visibility(self.caster, self.sampling)
         self.c_matrix = self.model.diffuse_matrix(mesh, self.sampling, self.visibility)
@@ -49,8 +53,8 @@ class Predictor:
         coverage : (H, W) float32, 1 where the pixel centre sees the mesh.
         """
         est = self.estimate
-        origins, dirs = camera.pixel_rays()
-        face, _ = self.caster.first_hits(origins, dirs)
+        _, dirs = camera.pixel_rays()
+        face = self.caster.face_id_buffer(camera).ravel()
         hit = np.nonzero(face >= 0)[0]
         f = face[hit]
         mirror = mirror_directions(self.mesh.face_normals[f], -dirs[hit])

@@ -5,6 +5,8 @@ All queries are batched Dr.Jit calls over many rays; nothing loops over rays in 
 """
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 
 from ..core.camera import Camera
@@ -32,6 +34,9 @@ def mitsuba_mesh(mesh: TriangleMesh, name: str = "mesh", props=None, uv: np.ndar
     return m
 
 
+# face-ID buffers a caster keeps (int32: 128 buffers of 512 x 512)
+BUFFER_CACHE_BYTES = 128 * 2**20
+
 MAX_COORDINATE = 1e15   # float32: squared distances stay below 1e30 (they overflow at 3.4e38)
 
 
@@ -58,7 +63,8 @@ class RayCaster:
             "mesh": mitsuba_mesh(mesh),
         })
         self.scale = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
-        self._centres: dict[tuple, np.ndarray] = {}   # pixel-centre face IDs of the last buffers' cameras
+        # face-ID buffers by (kind, camera), least recently used first, at most BUFFER_CACHE_BYTES
+        self._buffers: OrderedDict[tuple, np.ndarray] = OrderedDict()
 
     def _rays(self, origins: np.ndarray, directions: np.ndarray, tmax: float | None = None):
         mi = self.mi
@@ -97,7 +103,7 @@ class RayCaster:
                 np.where(hit, np.asarray(pi.t, dtype=np.float64), np.inf))
 
     def face_id_buffer(self, camera: Camera) -> np.ndarray:
-        """(H, W) int64 face seen through each pixel centre, -1 for background."""
+        """(H, W) int32 face seen through each pixel centre, -1 for background (read-only)."""
         return self.face_id_buffers([camera], pure=False)[0]
 
     def face_id_buffers(self, cameras: list[Camera], pure: bool = False,
@@ -107,33 +113,42 @@ class RayCaster:
         With ``pure=True`` a pixel keeps its face only when the rays through its
         four corners hit that same face (-1 otherwise): such pixels are covered by
         one face alone, so their colour is that face's even in antialiased images.
-        The pixel-centre buffers of the last call are kept and reused for the same
-        cameras (the pose check and the observations trace the same views).
+        Buffers are kept per camera (pose, intrinsics, size) up to
+        :data:`BUFFER_CACHE_BYTES`, the least recently used dropped first: the pose check,
+        the pose refinement's held-out estimates and the observations trace the same views
+        again and again, and only a moved camera is traced anew.
 
         Returns
         -------
-        list of (H, W) int64 arrays, -1 for background (or impure pixels); read-only
-        without ``pure``.
+        list of (H, W) int32 arrays, -1 for background (or impure pixels); read-only.
         """
         keys = [_camera_key(cam) for cam in cameras]
-        missing = {key: cam for cam, key in zip(cameras, keys) if key not in self._centres}
-        corners = [Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, cam.width + 1, cam.height + 1)
-                   for cam in cameras] if pure else []   # (H+1) x (W+1) grids of rays through the pixel corners
-        traced = self._trace(list(missing.values()) + corners, max_rays)
-        known = dict(self._centres)
-        for key, buffer in zip(missing, traced):
-            buffer.flags.writeable = False   # kept for the next call: nobody may change it
-            known[key] = buffer
-        centres = [known[key] for key in keys]
-        self._centres = dict(zip(keys, centres))
-        if not pure:
-            return centres
-        out = []
-        for centre, corner in zip(centres, traced[len(missing):]):
+        kind = "pure" if pure else "centre"
+        held = {k: self._buffers[k] for key in keys for k in (("centre", key), (kind, key)) if k in self._buffers}
+        centres = {key: cam for cam, key in zip(cameras, keys) if ("centre", key) not in held}
+        corners = {key: Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, cam.width + 1, cam.height + 1)
+                   for cam, key in zip(cameras, keys) if pure and (kind, key) not in held}   # (H+1) x (W+1) rays
+        traced = self._trace(list(centres.values()) + list(corners.values()), max_rays)
+        for key, buffer in zip(centres, traced):
+            held[("centre", key)] = _read_only(buffer)
+        for key, corner in zip(corners, traced[len(centres):]):
+            centre = held[("centre", key)]
             same = ((corner[:-1, :-1] == centre) & (corner[1:, :-1] == centre)
                     & (corner[:-1, 1:] == centre) & (corner[1:, 1:] == centre))
-            out.append(np.where(same, centre, -1))
-        return out
+            held[("pure", key)] = _read_only(np.where(same, centre, -1))
+        for k, buffer in held.items():
+            self._keep(k, buffer)
+        return [held[(kind, key)] for key in keys]
+
+    def _keep(self, key: tuple, buffer: np.ndarray) -> None:
+        """Hold ``buffer`` under ``key`` as the most recently used, dropping the least recently
+        used beyond :data:`BUFFER_CACHE_BYTES`."""
+        self._buffers[key] = buffer
+        self._buffers.move_to_end(key)
+        total = sum(b.nbytes for b in self._buffers.values())
+        while total > BUFFER_CACHE_BYTES and len(self._buffers) > 1:
+            _, dropped = self._buffers.popitem(last=False)
+            total -= dropped.nbytes
 
     def _trace(self, grids: list[Camera], max_rays: int) -> list[np.ndarray]:
         """(H, W) first-hit faces of each camera's pixel grid, in batches of up to ``max_rays`` rays."""
@@ -150,6 +165,13 @@ class RayCaster:
             if grid is not None:
                 batch.append(grid)
         return buffers
+
+
+def _read_only(buffer: np.ndarray) -> np.ndarray:
+    """``buffer`` as int32, read-only: a cached buffer is shared with every later caller."""
+    buffer = buffer.astype(np.int32)
+    buffer.flags.writeable = False
+    return buffer
 
 
 def _camera_key(camera: Camera) -> tuple:

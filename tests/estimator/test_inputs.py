@@ -129,9 +129,10 @@ def test_an_estimate_counts_the_faces_observed_through_pixel_centres():
     assert np.all(est.observed[hit])
 
 
-def test_face_id_buffers_reuse_the_last_calls_centres(monkeypatch):
-    """The pose check and the observations trace the same views: the second call traces only
-    what changed (the corner rays; a moved camera) and gives what a fresh caster gives."""
+def test_face_id_buffers_are_traced_once_per_camera(monkeypatch):
+    """The pose check, the pose refinement's estimates and the observations trace the same views:
+    a later call traces only what is new (the corner rays; a moved camera) and gives what a
+    fresh caster gives."""
     mesh = sphere(1)
     cams = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 40, 32) for eye in ([0, 0, 4], [3, 1, 2])]
     fresh_pure = RayCaster(mesh).face_id_buffers(cams, pure=True, max_rays=1500)
@@ -151,6 +152,25 @@ def test_face_id_buffers_reuse_the_last_calls_centres(monkeypatch):
     again = caster.face_id_buffers([cams[0], moved], max_rays=1500)
     assert sum(traced) == 40 * 32 and again[0] is centres[0]         # the moved camera alone
     np.testing.assert_array_equal(again[1], RayCaster(mesh).face_id_buffer(moved))
+    traced.clear()
+    later = caster.face_id_buffers(cams + [moved], pure=True, max_rays=1500)
+    assert sum(traced) == 41 * 33 and later[1] is pure[1]            # the cameras of every earlier call are kept
+
+
+def test_face_id_buffers_are_kept_within_their_budget(monkeypatch):
+    """Beyond BUFFER_CACHE_BYTES the least recently used buffers are dropped (and traced again)."""
+    from estimator.rays import raycast
+
+    monkeypatch.setattr(raycast, "BUFFER_CACHE_BYTES", 3 * 40 * 32 * 4)   # three int32 buffers
+    caster = RayCaster(sphere(1))
+    cams = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 40, 32) for eye in ([0, 0, 4], [3, 1, 2], [0, 4, 1],
+                                                                                [-3, 0, 2])]
+    first = caster.face_id_buffers(cams)                              # four: the first is dropped
+    assert sum(b.nbytes for b in caster._buffers.values()) <= raycast.BUFFER_CACHE_BYTES
+    assert caster.face_id_buffers(cams[3:])[0] is first[3]
+    again = caster.face_id_buffers(cams[:1])[0]
+    assert again is not first[0]
+    np.testing.assert_array_equal(again, first[0])
 
 
 def test_median_colour_matches_numpy():
