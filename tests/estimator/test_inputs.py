@@ -205,3 +205,9 @@ def test_a_view_scaled_beyond_any_dynamic_range_is_named():
     views = [View(v.name, v.camera, v.rgb * (1e38 if k == 3 else 1.0), v.alpha) for k, v in enumerate(data.views)]
     with pytest.raises(InputError, match=r"view view3 is exposed 1\.\d+e\+38 x the median view.s level"):
         estimate(MultiViewData(data.mesh, views), "bilinear-clustered", micro_config())
+
+
+def test_a_caster_of_another_mesh_is_refused():
+    data = MultiViewData(sphere(1), [View("v", CAM, np.ones((12, 16, 3)))])
+    with pytest.raises(ValueError, match="caster was built for another mesh"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50), caster=RayCaster(sphere(2)))
