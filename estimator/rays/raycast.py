@@ -125,7 +125,9 @@ class RayCaster:
         keys = [_camera_key(cam) for cam in cameras]
         kind = "pure" if pure else "centre"
         held = {k: self._buffers[k] for key in keys for k in (("centre", key), (kind, key)) if k in self._buffers}
-        centres = {key: cam for cam, key in zip(cameras, keys) if ("centre", key) not in held}
+        # a centre buffer is traced only where it is asked for, or where a pure one must be made from it
+        centres = {key: cam for cam, key in zip(cameras, keys)
+                   if ("centre", key) not in held and (kind, key) not in held}
         corners = {key: Camera(cam.c2w, cam.fx, cam.fy, cam.cx + 0.5, cam.cy + 0.5, cam.width + 1, cam.height + 1)
                    for cam, key in zip(cameras, keys) if pure and (kind, key) not in held}   # (H+1) x (W+1) rays
         traced = self._trace(list(centres.values()) + list(corners.values()), max_rays)
