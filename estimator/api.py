@@ -11,6 +11,7 @@ from .core.data import MultiViewData
 from .core.errors import InputError
 from .diagnostics import screening, trust
 from .methods import get_method
+from .methods.base import REGISTRY
 from .model.estimate import Estimate
 from .model.reflection_models import reflection_model
 from .pipeline import exposure, pose
@@ -64,7 +65,8 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
             data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates, caster),
             rounds, min(config.pose_folds, len(data.views)), caster, log)
     pose_seconds = time.perf_counter() - t0
-    prep = prepare(data, config, log, cls.name, cls.streams, caster)
+    prep = prepare(data, config, log, cls.name, cls.streams, caster,
+                   ", ".join(sorted(name for name, kind in REGISTRY.items() if kind.streams)))
     gains = None
     if config.view_gains:
         gains = exposure.view_gains(prep.obs)

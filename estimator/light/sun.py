@@ -28,7 +28,7 @@ from ..core import sh
 from ..core.data import TriangleMesh
 from ..core.settings import Section
 from ..model.reflection import fresnel_dielectric
-from ..rays.raycast import RayCaster
+from ..rays.raycast import MISS, RayCaster
 from . import edge_fit
 
 SAMPLE_POINTS = 6       # shadow rays per face for its lit share
@@ -101,7 +101,7 @@ def sun_shading(mesh: TriangleMesh, caster: RayCaster, direction: np.ndarray, co
     starts = np.einsum("pk,fkj->fpj", bary, mesh.vertices[mesh.faces[facing]])             # (F', P, 3)
     origins = (starts + offset * caster.scale * normals[facing, None, :]).reshape(-1, 3)
     lit = np.zeros(len(cosine))
-    lit[facing] = (caster.first_hit_faces(origins, np.broadcast_to(d, origins.shape).copy()) < 0
+    lit[facing] = (caster.first_hit_faces(origins, np.broadcast_to(d, origins.shape).copy()) == MISS
                    ).reshape(-1, points).mean(axis=1)
     through = 1.0 if coat_ior is None else 1.0 - fresnel_dielectric(cosine, coat_ior)
     return cosine * through * lit / np.pi

@@ -7,13 +7,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..core import sh
-from ..core.data import MultiViewData
+from ..core.data import MultiViewData, TriangleMesh
 from ..core.errors import InputError
 from ..core.settings import Section
 from ..model.reflection import mirror_directions
 from ..model.reflection_models import ReflectionConfig, ReflectionModel, reflection_model
 from ..rays.backend import BackendConfig
-from ..rays.raycast import RayCaster
+from ..rays.raycast import FaceSubsetCaster, RayCaster
 from ..rays.visibility import SphereSampling, Visibility, VisibilityConfig, compute_visibility, sphere_sampling
 from .observations import ObservationConfig, Observations, gather_observations
 
@@ -96,11 +96,12 @@ class Prepared:
                              "use diffuse_rows/specular_rows on chunks")
         return self.c_matrix[self.obs.face]
 
-    def diffuse_rows(self, faces: np.ndarray) -> np.ndarray:
-        """(n, M) diffuse rows C_i of the faces (n,)."""
-        if not self.streamed:
+    def diffuse_rows(self, faces: np.ndarray, coat_ior: float | None = None) -> np.ndarray:
+        """(n, M) diffuse rows C_i of the faces (n,); with ``coat_ior``, of the light that
+        passes a smooth coat of that index on its way in."""
+        if not self.streamed and coat_ior is None:
             return self.c_matrix[faces]
-        return self.model.diffuse_matrix(self.data.mesh, self.sampling, self.visibility, faces)
+        return self.model.diffuse_matrix(self.data.mesh, self.sampling, self.visibility, faces, coat_ior)
 
     def specular_rows(self, rows: np.ndarray) -> np.ndarray:
         """(n, M) specular rows D_k of the kept observations ``rows`` (n,) (indices into ``obs``)."""
@@ -110,12 +111,13 @@ class Prepared:
         mirror = mirror_directions(self.data.mesh.face_normals[face], self.obs.view_dir[rows])
         return self.model.specular_rows(face, mirror, self.sampling, self.visibility)
 
-    def shading(self, light: np.ndarray) -> np.ndarray:
-        """(F, C) C_i . x of every face under the light unknown ``light`` (M, C)."""
-        if not self.streamed:
+    def shading(self, light: np.ndarray, coat_ior: float | None = None) -> np.ndarray:
+        """(F, C) C_i . x of every face under the light unknown ``light`` (M, C); with
+        ``coat_ior``, through a smooth coat of that index (:meth:`diffuse_rows`)."""
+        if not self.streamed and coat_ior is None:
             return self.c_matrix @ light
-        return self._projection("shading", light, self.data.mesh.num_faces,
-                                lambda part: self.diffuse_rows(part) @ light)
+        return self._projection(("shading", coat_ior), light, self.data.mesh.num_faces,
+                                lambda part: self.diffuse_rows(part, coat_ior) @ light)
 
     def gloss(self, light: np.ndarray) -> np.ndarray:
         """(N, C) D_k . x of every kept observation under the light unknown ``light`` (M, C)."""
@@ -123,8 +125,9 @@ class Prepared:
             return self.d_rows @ light
         return self._projection("gloss", light, len(self.obs.face), lambda part: self.specular_rows(part) @ light)
 
-    def _projection(self, kind: str, light: np.ndarray, count: int, rows_times_light) -> np.ndarray:
-        """A streamed projection, in chunks of :data:`ROW_CHUNK` rows; the last light's is kept."""
+    def _projection(self, kind, light: np.ndarray, count: int, rows_times_light) -> np.ndarray:
+        """A streamed projection, in chunks of :data:`ROW_CHUNK` rows; the last light's is kept
+        per ``kind`` (a hashable key)."""
         key = (light.shape, light.tobytes())
         cached = self._projections.get(kind)
         if cached is None or cached[0] != key:
@@ -143,6 +146,25 @@ class Prepared:
         return replace(self, obs=replace(sub, face=mapping[sub.face], num_faces=len(faces)),
                        c_matrix=self.diffuse_rows(faces), d_rows=self.specular_rows(np.nonzero(keep)[0]),
                        timings=dict(self.timings))
+
+    def sub_mesh(self, faces: np.ndarray) -> "Prepared":
+        """The problem on the mesh made of ``faces`` (S,) (sorted, unique) alone, renumbered
+        0..S-1 with its vertices compacted, its rows held: a method runs on it as on any mesh.
+        The shadow function keeps the whole mesh's rows, and the caster traces the whole mesh
+        (:class:`~estimator.rays.raycast.FaceSubsetCaster`), so the other faces still cast
+        their shadows."""
+        whole = self.data.mesh
+        vertices, corners = np.unique(whole.faces[faces], return_inverse=True)
+        mesh = TriangleMesh(whole.vertices[vertices], corners.reshape(-1, 3))
+        sub = self.face_subset(faces)
+        mapping = np.full(whole.num_faces, -1, dtype=np.int64)
+        mapping[faces] = np.arange(len(faces))
+        seen = self.all_obs.subset(mapping[self.all_obs.face] >= 0)
+        unresolved = None if seen.unresolved is None else seen.unresolved[faces]
+        return replace(sub, data=replace(self.data, mesh=mesh), caster=FaceSubsetCaster(self.caster, faces, mesh),
+                       visibility=Visibility(self.visibility.bits[faces], self.visibility.num_directions),
+                       all_obs=replace(seen, face=mapping[seen.face], num_faces=len(faces), unresolved=unresolved),
+                       obs=replace(sub.obs, unresolved=unresolved))
 
     def projected(self, light: np.ndarray) -> "Prepared":
         """The same observations with the light fixed to ``light`` (M, 3): each row becomes
@@ -182,13 +204,13 @@ def with_config(prep: Prepared, config: PrepareConfig) -> Prepared:
 
 
 def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | None = None,
-            streaming: bool = True, caster: RayCaster | None = None) -> Prepared:
+            streaming: bool = True, caster: RayCaster | None = None, alternatives: str = "") -> Prepared:
     """Run the shared stages. ``log`` (optional callable) receives progress lines;
     ``caster``: ray queries of ``data.mesh`` already built (None: built here).
 
     ``streaming`` False (a method that needs the rows held) refuses, before the shadow
     function is computed, a problem larger than ``config.dense_rows``; ``method`` names it
-    in the message.
+    in the message, and ``alternatives`` the methods that stream.
     """
     say = log or (lambda message: None)
     timings = {}
@@ -220,8 +242,8 @@ def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | 
                 f"method {method!r} holds its reflection rows in memory, and this problem has "
                 f"{data.mesh.num_faces} faces + {len(obs.face)} observations > dense_rows="
                 f"{config.dense_rows} (at most {config.dense_rows * sh.num_coeffs(config.sh_order) * 8 / 2**30:.1f}"
-                " GiB of rows): use bilinear-per-face, known-illumination or median-color, which "
-                "stream them, or raise dense_rows"
+                f" GiB of rows): use a method that streams them ({alternatives or 'see the registry'}), or "
+                "raise dense_rows"
             )
         say(f"streamed rows: {data.mesh.num_faces} faces + {len(obs.face)} observations > dense_rows "
             f"{config.dense_rows}")

@@ -39,6 +39,9 @@ BUFFER_CACHE_BYTES = 128 * 2**20
 
 MAX_COORDINATE = 1e15   # float32: squared distances stay below 1e30 (they overflow at 3.4e38)
 
+MISS = -1        # first_hit_faces: the ray hits nothing
+ELSEWHERE = -2   # FaceSubsetCaster.first_hit_faces: the ray hits a face of the whole mesh outside the subset
+
 
 class RayCaster:
     """A Mitsuba scene holding one mesh (robust intersections), for batched ray queries.
@@ -76,7 +79,7 @@ class RayCaster:
         return ray
 
     def first_hit_faces(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """Index of the first face hit by each ray, -1 on a miss.
+        """Index of the first face hit by each ray, :data:`MISS` (-1) on a miss.
 
         Parameters
         ----------
@@ -91,7 +94,7 @@ class RayCaster:
         pi = self.scene.ray_intersect_preliminary(self._rays(origins, directions))
         hit = np.asarray(pi.is_valid(), dtype=bool)
         prim = np.asarray(pi.prim_index, dtype=np.int64)
-        return np.where(hit, prim, -1)
+        return np.where(hit, prim, MISS)
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(face (N,) int64 with -1 on a miss, distance t (N,) float64, inf on a miss)."""
@@ -180,3 +183,29 @@ def _camera_key(camera: Camera) -> tuple:
     """What a camera's pixel rays depend on: its pose, intrinsics and size."""
     return (np.asarray(camera.c2w, dtype=np.float64).tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
             camera.width, camera.height)
+
+
+class FaceSubsetCaster:
+    """The ray queries a solve makes on a sub-mesh made of some faces of a whole mesh, traced
+    against the whole mesh: the other faces still block rays (a sun's shadow), and a ray
+    that first hits one of them reports :data:`ELSEWHERE`.
+
+    Parameters
+    ----------
+    whole : the caster of the whole mesh.
+    faces : (S,) the whole mesh's faces that make the sub-mesh, in the sub-mesh's face order.
+    mesh : the sub-mesh (face s is ``whole.mesh`` face ``faces[s]``).
+    """
+
+    def __init__(self, whole: RayCaster, faces: np.ndarray, mesh: TriangleMesh):
+        if len(faces) != mesh.num_faces:
+            raise InputError(f"a sub-mesh of {mesh.num_faces} faces needs as many whole-mesh faces, got {len(faces)}")
+        self.whole, self.mesh, self.scale = whole, mesh, whole.scale
+        self._index = np.full(whole.mesh.num_faces, ELSEWHERE, dtype=np.int64)
+        self._index[faces] = np.arange(len(faces))
+
+    def first_hit_faces(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(N,) int64 sub-mesh face first hit by each ray (origins, directions (N, 3)),
+        :data:`MISS` on a miss, :data:`ELSEWHERE` when the face is not in the sub-mesh."""
+        hit = self.whole.first_hit_faces(origins, directions)
+        return np.where(hit >= 0, self._index[np.maximum(hit, 0)], hit)

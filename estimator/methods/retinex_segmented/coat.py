@@ -32,7 +32,7 @@ def through_coat(ctx: FitContext) -> Shading:
     if fits.through_coat is None:
         fits.through_coat = ctx.model.diffuse_matrix(prep.data.mesh, prep.sampling, prep.visibility,
                                                      coat_ior=ctx.config.coat_ior)
-    return Shading(fits.through_coat)
+    return Shading(fits.through_coat, coat_ior=ctx.config.coat_ior)
 
 
 def coat_map_candidate(ctx: FitContext, regions: bool) -> coat_map.ReflectedLight | None:

@@ -15,7 +15,8 @@ from ...model.estimate import Estimate
 from ..base import Method, register_method
 from .decision import choose, light_hypotheses, prediction_cost
 from .result import to_estimate
-from .values import FitContext, LightSource, ReflectionFits
+from .streamed import solve_streamed
+from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
 
 
 @dataclass
@@ -95,41 +96,52 @@ class RetinexSegmented(Method):
 
     name = "retinex-segmented"
     default_loss = "cauchy"
+    streams = True
 
     def solve(self, prep):
         c = self.config
         if c.components == "specular":
             raise InputError("retinex-segmented estimates the diffuse albedo from shading; for specular-only "
                              "data (components='specular') use bilinear-per-face")
+        if prep.streamed:
+            return solve_streamed(self, prep)
+        return self.solve_held(prep).estimate
+
+    def solve_held(self, prep) -> Solution:
+        """Steps 1-6 on a problem whose rows are held; the estimate with the hypothesis it came
+        from and the coat's reflection subtracted before it (what :func:`.streamed.solve_streamed`
+        carries to the faces of a larger problem)."""
+        c = self.config
         t = time.perf_counter()
         fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations
-        est = self._fit(prep, fits)
+        est, chosen = self._fit(prep, fits)
         self.log(f"light from {est.info['light_from']} ({est.info['uniform_regions']} uniform regions), "
                  f"{time.perf_counter() - t:.1f} s")
-        weight = np.zeros((1, 3))
+        weight, applied = np.zeros((1, 3)), None
         if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
             obs = prep.obs
             rows = coat.coat_rows(prep.data.mesh.face_normals[obs.face], obs.view_dir,
                                   est.light, c.coat_order, c.coat_ior)
             group, groups = coat_groups(est, c.coat_per_region)
-            group = group[obs.face]
-            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, group=group, num_groups=groups)
-            weight = weight * coat.admissible_scale(obs.rgb, weight[group] * rows, c.coat_max_negative,
-                                                    group=group, num_groups=groups)[:, None]
-            reflection = weight[group] * rows
+            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, group=group[obs.face],
+                                   num_groups=groups)
+            weight = weight * coat.admissible_scale(obs.rgb, weight[group[obs.face]] * rows, c.coat_max_negative,
+                                                    group=group[obs.face], num_groups=groups)[:, None]
+            reflection = weight[group[obs.face]] * rows
             coat_level = np.median(np.linalg.norm(reflection, axis=1))
             if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
                 s = est.info["sun"]
                 found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
                                       c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
-                coated = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found)
+                coated, coated_chosen = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits,
+                                                  found)
                 # the same criterion, on the colours as observed: the coated fit predicts them
                 # with its coat's reflection added back, at one more unknown per region's
                 # strength and two for the grey coat's shared colour (three with one group)
                 costs = prediction_cost(prep, [est, coated], [None, reflection],
-                                        [0, len(np.unique(group)) + 2])
+                                        [0, len(np.unique(group[obs.face])) + 2])
                 if costs[1] < costs[0]:
-                    est = coated
+                    est, chosen, applied = coated, coated_chosen, CoatReflection(est.light, weight, group)
                 else:
                     weight = np.zeros_like(weight)  # the coat does not pay its way: not applied
                 self.log(f"coat's reflection {'removed' if costs[1] < costs[0] else 'not removed'} (cost "
@@ -139,11 +151,12 @@ class RetinexSegmented(Method):
                 weight = np.zeros_like(weight)  # negligible: not applied
         est.info["coat_weight"] = weight.tolist()
         est.info["clustering_s"] = time.perf_counter() - t
-        return est
+        return Solution(est, chosen, applied)
 
-    def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None) -> Estimate:
+    def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None) -> tuple[Estimate, Hypothesis]:
         """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
-        (None: search for one when ``sun_min_gain`` < 1)."""
+        (None: search for one when ``sun_min_gain`` < 1). Returns the chosen estimate and its
+        hypothesis."""
         c = self.config
         mesh, obs = prep.data.mesh, prep.obs
         radiance = group_quantile(obs.face, obs.rgb, mesh.num_faces, c.retinex_quantile)
@@ -159,4 +172,6 @@ class RetinexSegmented(Method):
             ctx.fit["indirect"] = ctx.extra = indirect.indirect_shading(
                 prep.caster, prep.sampling, prep.visibility, np.where(usable[:, None], radiance, 0.0))
         hypotheses = light_hypotheses(ctx, radiance, found)
-        return choose(prep, hypotheses, [to_estimate(ctx, h, self) for h in hypotheses])
+        estimates = [to_estimate(ctx, h, self) for h in hypotheses]
+        chosen = choose(prep, hypotheses, estimates)
+        return chosen, hypotheses[[e is chosen for e in estimates].index(True)]

@@ -37,7 +37,11 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     group = labels.copy()
     free = np.nonzero(group < 0)[0]
     group[free] = regions + np.arange(len(free))
-    result = method._solve_groups(prep, group, f if regions == 0 else regions + len(free), light)
+    groups = f if regions == 0 else regions + len(free)
+    if prep.streamed:   # on the rows' projections onto the light (O(N) memory)
+        result = method._solve_groups(prep.projected(light), group, groups, np.eye(3))
+    else:
+        result = method._solve_groups(prep, group, groups, light)
     specular = np.zeros((f, 3))
     reference = result.specular[:regions] if regions else result.specular[group[h.lit]]
     specular[:] = np.median(reference, axis=0) if len(reference) else 0.0

@@ -11,9 +11,14 @@ from .values import FitContext, Shading
 def divide(shading: Shading, radiance: np.ndarray, light: np.ndarray, usable: np.ndarray,
            extra=0.0) -> tuple[np.ndarray, np.ndarray]:
     """(F, 3) radiance over the shading ``shading.columns @ light`` (plus an ``extra`` indirect
-    shading), and (F,) where that is an albedo: usable and lit above 2 % of the 95th-percentile
-    shading (a face in deep shadow divides noise by nearly nothing)."""
-    shade = shading.columns @ light + extra
+    shading), and (F,) where that is an albedo (:func:`divide_shade`)."""
+    return divide_shade(shading.columns @ light + extra, radiance, usable)
+
+
+def divide_shade(shade: np.ndarray, radiance: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 3) ``radiance`` over ``shade`` (F, 3), and (F,) where that is an albedo: usable and
+    lit above 2 % of the 95th-percentile shading (a face in deep shadow divides noise by
+    nearly nothing)."""
     lum = shade.mean(axis=1)
     level = max(float(np.percentile(lum[usable], 95)), 1e-30)
     lit = usable & np.all(shade > 0, axis=1) & (lum > 0.02 * level)

@@ -8,9 +8,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ...core import sh
 from ...light.coat_map import ReflectedLight
 from ...light.lobe_light import LobeLight
 from ...light.sun import Sun
+from ...model.estimate import Estimate
 from ...model.reflection_models import ReflectionModel
 from ...pipeline.observations import Observations
 from ...pipeline.prepared import Prepared
@@ -40,14 +42,16 @@ class LightSource(str, Enum):
 @dataclass(frozen=True)
 class Shading:
     """Each face's shading columns: (F, M) for the SH light, then the sun's column when ``sun``
-    is set (its irradiance is the light's last row)."""
+    is set (its irradiance is the light's last row). ``coat_ior``: the SH columns hold the light
+    that passes a smooth coat of that index on its way in (None: the model's diffuse rows)."""
 
     columns: np.ndarray
     sun: Sun | None = None
+    coat_ior: float | None = None
 
     def with_sun(self, sun: Sun, column: np.ndarray) -> "Shading":
         """(F, M + 1): these columns and the sun's (F,) column."""
-        return Shading(np.hstack([self.columns, column[:, None]]), sun)
+        return Shading(np.hstack([self.columns, column[:, None]]), sun, self.coat_ior)
 
 
 @dataclass
@@ -119,4 +123,31 @@ class FitContext:
     @property
     def sky_width(self) -> int:
         """M: the SH light's columns (without a sun)."""
-        return self.prep.c_matrix.shape[1]
+        return sh.num_coeffs(self.model.order)
+
+
+@dataclass(frozen=True)
+class CoatReflection:
+    """The coat's reflection a solve subtracted from the colours: observation k of face f
+    loses ``weight[group[f]] * coat.coat_rows(normal, view, light)[k]``.
+
+    Attributes
+    ----------
+    light : (M, 3) the light whose low orders the coat reflects (the first fit's).
+    weight : (G, 3) the coat's colour per coat group.
+    group : (F,) the coat group of each face.
+    """
+
+    light: np.ndarray
+    weight: np.ndarray
+    group: np.ndarray
+
+
+@dataclass
+class Solution:
+    """What a held solve found: the estimate, the hypothesis it came from, and the coat's
+    reflection subtracted before its fit (None: none)."""
+
+    estimate: Estimate
+    hypothesis: Hypothesis
+    coat: CoatReflection | None
