@@ -229,6 +229,41 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
                           spare >= ROWS_PER_VERTEX * cells)
 
 
+def diffuse_radiance(fitted: ReflectedLight, face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
+                     normals: np.ndarray, sampling: SphereSampling, visibility: Visibility,
+                     ior: float = CoatConfig.coat_ior, rounds: int = 4, loss: str = "cauchy") -> np.ndarray:
+    """(F, 3) each face's diffuse radiance under the map of ``fitted``, held fixed: the
+    per-face weighted least squares of :func:`fit_reflected_light` (the map's reflection
+    removed, the coat's exit transmission divided out), reweighted ``rounds`` times by the
+    robust ``loss`` of the residuals; NaN where a face has no usable row. Observations
+    (``face``, ``rgb``, ``view_dir``: (N,), (N, 3), (N, 3)) of faces the map was not fitted on
+    are welcome: this is how a map fitted on part of a mesh reaches the rest."""
+    face = np.asarray(face, dtype=np.int64)
+    n = normals[face]
+    cos = np.sum(n * view_dir, axis=1)
+    mirror = mirror_directions(n, view_dir)
+    keep = (cos > 0) & visibility.lookup(face, sampling.nearest(mirror))
+    face, rgb, cos, mirror = face[keep], rgb[keep], cos[keep], mirror[keep]
+    height, width = fitted.radiance.shape[:2]
+    fresnel = fresnel_dielectric(cos, ior)
+    transmit = 1.0 - fresnel
+    values = rgb - fresnel[:, None] * (bilinear_rows(mirror, height, width) @ fitted.radiance.reshape(-1, 3))
+    count = len(normals)
+    diffuse = np.full((count, 3), np.nan)
+    for c in range(3):
+        weights = np.ones(len(face))
+        for round_ in range(max(rounds, 1) + 1):
+            denominator = np.bincount(face, weights * transmit ** 2, minlength=count)
+            level = np.bincount(face, weights * transmit * values[:, c], minlength=count) / np.maximum(
+                denominator, 1e-300)
+            if round_ == max(rounds, 1):
+                break
+            residual = np.abs(values[:, c] - transmit * level[face])
+            weights = robust.irls_weights(residual, loss, robust.robust_scale(residual, floor=1e-12))
+        diffuse[denominator > 0, c] = level[denominator > 0]
+    return diffuse
+
+
 def _project_off_faces(a, y, b, weights):
     """Rows ``a`` (N, K) and values ``y`` (N,) with each face's transmission column of ``b``
     (N, F) projected off in the ``weights`` (N,) inner product (the per-face diffuse

@@ -44,8 +44,8 @@ def indirect_shading(caster: RayCaster, sampling: SphereSampling, visibility: Vi
     Parameters
     ----------
     radiance : (F, 3) diffuse radiance of each face (0 where unknown); a ray that hits no face
-        of ``caster.mesh`` (a miss, or a face outside a
-        :class:`~estimator.rays.raycast.FaceSubsetCaster`'s subset) adds nothing.
+        of ``caster.mesh`` (a miss, or a face in none of a
+        :class:`~estimator.rays.raycast.ClusterCaster`'s clusters) adds nothing.
     max_rays : rays traced per batch (faces are taken in chunks of max_rays / K).
     offset : ray origins sit this fraction of the bounding-box diagonal above the centroid.
     """

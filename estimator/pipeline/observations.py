@@ -81,6 +81,28 @@ class Observations:
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
                             self.rejected, None if self.view is None else self.view[keep], self.unresolved)
 
+    def merged(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> "Observations":
+        """One row per (cluster, view) pair: the ``weight``-weighted mean colour and view
+        direction of the rows of the cluster's faces in that view, what one face covering the
+        cluster would show. ``cluster`` (num_faces,) gives each face's cluster in [0, count)
+        (-1: its rows are left out); ``weight`` (num_faces,) each face's weight (its area)."""
+        if self.view is None:
+            raise InputError("observations without their views cannot be merged per view")
+        keep = cluster[self.face] >= 0
+        key = cluster[self.face[keep]] * self.num_views + self.view[keep]
+        rows, inverse = np.unique(key, return_inverse=True)
+        w = weight[self.face[keep]]
+        total = np.bincount(inverse, w, minlength=len(rows))
+
+        def mean(values):
+            return np.stack([np.bincount(inverse, w * values[keep, k], minlength=len(rows)) for k in range(3)],
+                            axis=1) / total[:, None]
+
+        direction = mean(self.view_dir)
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        return Observations(rows // self.num_views, mean(self.rgb), direction, count, self.num_views, self.rejected,
+                            rows % self.num_views)
+
     def observed_faces(self) -> np.ndarray:
         """(F,) bool: faces with at least one row."""
         return np.bincount(self.face, minlength=self.num_faces) > 0

@@ -5,6 +5,7 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy import sparse
 
 from ..core import sh
 from ..core.data import MultiViewData, TriangleMesh
@@ -13,7 +14,7 @@ from ..core.settings import Section
 from ..model.reflection import mirror_directions
 from ..model.reflection_models import ReflectionConfig, ReflectionModel, reflection_model
 from ..rays.backend import BackendConfig
-from ..rays.raycast import FaceSubsetCaster, RayCaster
+from ..rays.raycast import ClusterCaster, RayCaster
 from ..rays.visibility import SphereSampling, Visibility, VisibilityConfig, compute_visibility, sphere_sampling
 from .observations import ObservationConfig, Observations, gather_observations
 
@@ -29,9 +30,10 @@ class StreamingConfig(Section):
     dense_rows : faces plus kept observations above which the reflection rows (float64, M
         wide) are not held in memory but computed in chunks when needed (:class:`Prepared`);
         1.5 M rows hold at most 1.4 GiB. Only methods with ``streams`` accept such a problem.
-    light_faces : a streamed per-face solve finds the light from the observations of this many
-        observed faces drawn at random (seeded), then every face's albedos with the light
-        fixed: 121 light coefficients are determined many times over by 20,000 faces.
+    light_faces : a streamed solve finds the light from the observations of this many
+        observed faces, then every face's albedos with the light fixed: 121 light
+        coefficients are determined many times over by 20,000 faces. The per-face methods
+        draw them at random (seeded); the default solves on this many clusters of faces.
     """
 
     dense_rows: int = 1_500_000
@@ -79,6 +81,7 @@ class Prepared:
     c_matrix: np.ndarray
     d_rows: np.ndarray
     timings: dict = field(default_factory=dict)
+    adjacency: np.ndarray | None = None   # (E, 2) a clustered problem's adjacent faces (None: the mesh's)
     # the last light's projections (shading, gloss): a streamed problem's cost one full pass over
     # the rows each, and the solve and the trust diagnostics ask for the same light
     _projections: dict = field(default_factory=dict, init=False, repr=False, compare=False)
@@ -147,24 +150,44 @@ class Prepared:
                        c_matrix=self.diffuse_rows(faces), d_rows=self.specular_rows(np.nonzero(keep)[0]),
                        timings=dict(self.timings))
 
-    def sub_mesh(self, faces: np.ndarray) -> "Prepared":
-        """The problem on the mesh made of ``faces`` (S,) (sorted, unique) alone, renumbered
-        0..S-1 with its vertices compacted, its rows held: a method runs on it as on any mesh.
-        The shadow function keeps the whole mesh's rows, and the caster traces the whole mesh
-        (:class:`~estimator.rays.raycast.FaceSubsetCaster`), so the other faces still cast
-        their shadows."""
+    def clustered(self, cluster: np.ndarray, representative: np.ndarray) -> "Prepared":
+        """The problem on clusters of faces, its rows held, as if each cluster were one face:
+        cluster k has one observation per view, the area-weighted mean of its faces' there
+        (:meth:`Observations.merged`), where ``cluster`` (F,) gives each face's cluster (-1:
+        left out); its diffuse row is its faces' area-weighted mean row (the merged colour's
+        shading), its other geometry (normal, shadow function, specular rows, the rays of a
+        sun or of the light the object reflects) that of the face ``representative[k]`` (K,). Clusters are
+        adjacent where two of their faces are (:attr:`edges`). The caster traces the whole
+        mesh (:class:`~estimator.rays.raycast.ClusterCaster`): every face casts its shadow."""
         whole = self.data.mesh
-        vertices, corners = np.unique(whole.faces[faces], return_inverse=True)
+        vertices, corners = np.unique(whole.faces[representative], return_inverse=True)
         mesh = TriangleMesh(whole.vertices[vertices], corners.reshape(-1, 3))
-        sub = self.face_subset(faces)
-        mapping = np.full(whole.num_faces, -1, dtype=np.int64)
-        mapping[faces] = np.arange(len(faces))
-        seen = self.all_obs.subset(mapping[self.all_obs.face] >= 0)
-        unresolved = None if seen.unresolved is None else seen.unresolved[faces]
-        return replace(sub, data=replace(self.data, mesh=mesh), caster=FaceSubsetCaster(self.caster, faces, mesh),
-                       visibility=Visibility(self.visibility.bits[faces], self.visibility.num_directions),
-                       all_obs=replace(seen, face=mapping[seen.face], num_faces=len(faces), unresolved=unresolved),
-                       obs=replace(sub.obs, unresolved=unresolved))
+        count, areas = len(representative), whole.areas
+        obs, all_obs = self.obs.merged(cluster, count, areas), self.all_obs.merged(cluster, count, areas)
+        visibility = Visibility(self.visibility.bits[representative], self.visibility.num_directions)
+        mirror = mirror_directions(mesh.face_normals[obs.face], obs.view_dir)
+        pairs = cluster[whole.face_adjacency]
+        pairs = np.sort(pairs[np.all(pairs >= 0, axis=1) & (pairs[:, 0] != pairs[:, 1])], axis=1)
+        return replace(self, data=replace(self.data, mesh=mesh), caster=ClusterCaster(self.caster, cluster, mesh),
+                       visibility=visibility, all_obs=all_obs, obs=obs, c_matrix=self._mean_rows(cluster, count, areas),
+                       d_rows=self.model.specular_rows(obs.face, mirror, self.sampling, visibility),
+                       adjacency=np.unique(pairs, axis=0), timings=dict(self.timings))
+
+    def _mean_rows(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> np.ndarray:
+        """(count, M) the ``weight``-weighted mean diffuse row of each cluster's faces, in
+        chunks of :data:`ROW_CHUNK` faces."""
+        faces = np.nonzero(cluster >= 0)[0]
+        total = np.zeros((count, sh.num_coeffs(self.model.order)))
+        for start in range(0, len(faces), ROW_CHUNK):
+            part = faces[start:start + ROW_CHUNK]
+            mixing = sparse.csr_matrix((weight[part], (cluster[part], np.arange(len(part)))), shape=(count, len(part)))
+            total += mixing @ self.diffuse_rows(part)
+        return total / np.maximum(np.bincount(cluster[faces], weight[faces], minlength=count), 1e-300)[:, None]
+
+    @property
+    def edges(self) -> np.ndarray:
+        """(E, 2) pairs of adjacent faces: the mesh's, or a clustered problem's own."""
+        return self.data.mesh.face_adjacency if self.adjacency is None else self.adjacency
 
     def projected(self, light: np.ndarray) -> "Prepared":
         """The same observations with the light fixed to ``light`` (M, 3): each row becomes

@@ -40,7 +40,7 @@ BUFFER_CACHE_BYTES = 128 * 2**20
 MAX_COORDINATE = 1e15   # float32: squared distances stay below 1e30 (they overflow at 3.4e38)
 
 MISS = -1        # first_hit_faces: the ray hits nothing
-ELSEWHERE = -2   # FaceSubsetCaster.first_hit_faces: the ray hits a face of the whole mesh outside the subset
+ELSEWHERE = -2   # ClusterCaster.first_hit_faces: the ray hits a face in no cluster
 
 
 class RayCaster:
@@ -185,27 +185,28 @@ def _camera_key(camera: Camera) -> tuple:
             camera.width, camera.height)
 
 
-class FaceSubsetCaster:
-    """The ray queries a solve makes on a sub-mesh made of some faces of a whole mesh, traced
-    against the whole mesh: the other faces still block rays (a sun's shadow), and a ray
-    that first hits one of them reports :data:`ELSEWHERE`.
+class ClusterCaster:
+    """The ray queries a solve makes on a problem whose faces are clusters of a whole mesh's
+    faces (:meth:`estimator.pipeline.prepared.Prepared.clustered`), traced against the whole
+    mesh: every face still blocks rays (a sun's shadow), and a hit reports the hit face's
+    cluster, or :data:`ELSEWHERE` for a face in none.
 
     Parameters
     ----------
     whole : the caster of the whole mesh.
-    faces : (S,) the whole mesh's faces that make the sub-mesh, in the sub-mesh's face order.
-    mesh : the sub-mesh (face s is ``whole.mesh`` face ``faces[s]``).
+    cluster : (F,) the cluster of each whole-mesh face, -1 for none.
+    mesh : the clustered problem's mesh (one face per cluster).
     """
 
-    def __init__(self, whole: RayCaster, faces: np.ndarray, mesh: TriangleMesh):
-        if len(faces) != mesh.num_faces:
-            raise InputError(f"a sub-mesh of {mesh.num_faces} faces needs as many whole-mesh faces, got {len(faces)}")
+    def __init__(self, whole: RayCaster, cluster: np.ndarray, mesh: TriangleMesh):
+        if len(cluster) != whole.mesh.num_faces or cluster.max(initial=-1) >= mesh.num_faces:
+            raise InputError(f"the clusters of a {whole.mesh.num_faces}-face mesh must be {whole.mesh.num_faces} "
+                             f"indices below {mesh.num_faces}, got {len(cluster)} up to {cluster.max(initial=-1)}")
         self.whole, self.mesh, self.scale = whole, mesh, whole.scale
-        self._index = np.full(whole.mesh.num_faces, ELSEWHERE, dtype=np.int64)
-        self._index[faces] = np.arange(len(faces))
+        self._cluster = np.where(cluster >= 0, cluster, ELSEWHERE).astype(np.int64)
 
     def first_hit_faces(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """(N,) int64 sub-mesh face first hit by each ray (origins, directions (N, 3)),
-        :data:`MISS` on a miss, :data:`ELSEWHERE` when the face is not in the sub-mesh."""
+        """(N,) int64 cluster of the face first hit by each ray (origins, directions (N, 3)),
+        :data:`MISS` on a miss, :data:`ELSEWHERE` when that face is in no cluster."""
         hit = self.whole.first_hit_faces(origins, directions)
-        return np.where(hit >= 0, self._index[np.maximum(hit, 0)], hit)
+        return np.where(hit >= 0, self._cluster[np.maximum(hit, 0)], hit)

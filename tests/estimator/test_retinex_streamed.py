@@ -1,37 +1,52 @@
-"""The sub-mesh a streamed ``retinex-segmented`` finds its light on (:func:`patch_faces`)."""
+"""The clusters of faces a streamed ``retinex-segmented`` finds its light on (:func:`face_clusters`),
+and the observations merged per cluster and view (:meth:`Observations.merged`)."""
 from __future__ import annotations
 
 import numpy as np
 
-from estimator.methods.retinex_segmented.streamed import patch_faces
+from estimator.methods.retinex_segmented.streamed import face_clusters
+from estimator.pipeline.observations import Observations
 
 from .meshes import sphere
 
 
-def test_patches_are_contiguous_observed_faces_spread_over_the_object():
+def test_clusters_are_compact_patches_of_the_observed_faces():
     mesh = sphere(5)                                                  # 20,480 faces
     observed = np.nonzero(mesh.centroids[:, 1] > -0.5)[0]            # the underside unseen
-    faces = patch_faces(mesh.centroids, observed, 2000, 40)
-    assert np.all(np.isin(faces, observed)) and np.all(np.diff(faces) > 0)
-    assert 1000 <= len(faces) <= 2000                                 # 40 patches of 50, overlapping at most in part
-    # contiguous: nearly every face of a patch has a neighbour in the sub-mesh (a face drawn
-    # alone at this density would have one in ~1 - (1 - 0.1)^3 = 27 % of cases)
-    inside = np.zeros(mesh.num_faces, bool)
-    inside[faces] = True
-    adjacency = mesh.face_adjacency
-    neighbour = np.zeros(mesh.num_faces, bool)
-    both = inside[adjacency[:, 0]] & inside[adjacency[:, 1]]
-    neighbour[adjacency[both].ravel()] = True
-    assert neighbour[faces].mean() > 0.97
-    # spread: the patches' mean normals point to many sides (the light is seen from them)
-    normals = mesh.face_normals[faces]
-    assert normals[:, 1].min() < 0 < normals[:, 1].max()
-    assert np.ptp(np.arctan2(normals[:, 0], normals[:, 2])) > 5.0
-    # seeded
-    np.testing.assert_array_equal(faces, patch_faces(mesh.centroids, observed, 2000, 40))
+    cluster, representative = face_clusters(mesh, observed, 500)
+    assert len(representative) == 500 and np.all(np.isin(representative, observed))
+    assert np.all(cluster[observed] >= 0) and np.all(np.delete(cluster, observed) == -1)
+    np.testing.assert_array_equal(cluster[representative], np.arange(500))   # each represents its own
+    sizes = np.bincount(cluster[observed], minlength=500)
+    assert sizes.min() >= 1 and sizes.max() <= 6 * len(observed) / 500
+    # compact: a face lies within a few clusters' sides of its representative, and most
+    # adjacent faces share their cluster
+    side = np.sqrt(mesh.areas[observed].sum() / 500)
+    reach = np.linalg.norm(mesh.centroids[observed] - mesh.centroids[representative[cluster[observed]]], axis=1)
+    assert np.percentile(reach, 99) < 2 * side
+    a, b = mesh.face_adjacency.T
+    both = (cluster[a] >= 0) & (cluster[b] >= 0)
+    assert np.mean(cluster[a][both] == cluster[b][both]) > 0.7
+    np.testing.assert_array_equal(cluster, face_clusters(mesh, observed, 500)[0])   # seeded
 
 
-def test_every_observed_face_when_they_are_few():
+def test_every_observed_face_its_own_cluster_when_they_are_few():
     mesh = sphere(2)
-    observed = np.array([7, 3, 100])
-    np.testing.assert_array_equal(patch_faces(mesh.centroids, observed, 10, 4), [3, 7, 100])
+    cluster, representative = face_clusters(mesh, np.array([3, 7, 100]), 10)
+    np.testing.assert_array_equal(representative, [3, 7, 100])
+    np.testing.assert_array_equal(cluster[[3, 7, 100]], [0, 1, 2])
+    assert np.sum(cluster >= 0) == 3
+
+
+def test_merged_observations_are_area_weighted_means_per_cluster_and_view():
+    face = np.array([0, 1, 1, 2, 3])
+    view = np.array([0, 0, 1, 0, 1])
+    rgb = np.array([[1.0, 1, 1], [3, 3, 3], [5, 5, 5], [7, 7, 7], [9, 9, 9]])
+    direction = np.array([[0.0, 0, 1], [0, 1, 0], [0, 0, 1], [1, 0, 0], [0, 0, 1]])
+    obs = Observations(face, rgb, direction, 4, 2, None, view)
+    merged = obs.merged(np.array([0, 0, 1, -1]), 2, np.array([1.0, 3.0, 1.0, 1.0]))
+    np.testing.assert_array_equal(merged.face, [0, 0, 1])
+    np.testing.assert_array_equal(merged.view, [0, 1, 0])
+    np.testing.assert_allclose(merged.rgb[:, 0], [(1 + 3 * 3) / 4, 5, 7])      # face 3 left out
+    np.testing.assert_allclose(merged.view_dir[0], np.array([0, 3, 1]) / np.sqrt(10))
+    assert merged.num_faces == 2 and merged.num_views == 2

@@ -11,7 +11,7 @@ from estimator.light.edge_fit import log_shading_fit
 from estimator.light.sun import brightest_direction, find_sun, sun_shading
 from estimator.model.reflection import diffuse_matrix, fresnel_dielectric
 from estimator.model.reflection_models import reflection_model
-from estimator.rays.raycast import ELSEWHERE, MISS, FaceSubsetCaster, RayCaster
+from estimator.rays.raycast import ELSEWHERE, MISS, ClusterCaster, RayCaster
 from estimator.rays.visibility import compute_visibility, sphere_sampling
 
 from .meshes import lobed, sphere
@@ -44,25 +44,29 @@ def test_a_blocker_casts_a_full_shadow():
                                np.maximum(mesh.face_normals[lower_top] @ side, 0), atol=1e-12)
 
 
-def test_faces_outside_a_sub_mesh_still_cast_their_shadow():
-    """The lower sphere alone as a sub-mesh, traced against both spheres: its sun column equals
-    the whole mesh's, the upper sphere's shadow included, and a ray reports the sub-mesh's face
-    it hits, ELSEWHERE for the upper sphere and MISS for nothing."""
+def test_faces_outside_the_clusters_still_cast_their_shadow():
+    """The lower sphere's faces as clusters of one face each, traced against both spheres:
+    their sun column equals the whole mesh's, the upper sphere's shadow included, and a ray
+    reports the cluster it hits, ELSEWHERE for the upper sphere and MISS for nothing."""
     a, b = sphere(2), sphere(2)
     mesh = TriangleMesh(np.vstack([a.vertices, b.vertices + [0.0, 3.0, 0.0]]),
                         np.vstack([a.faces, b.faces + len(a.vertices)]))
     whole = RayCaster(mesh)
+    cluster = np.where(np.arange(mesh.num_faces) < a.num_faces, np.arange(mesh.num_faces), -1)
+    clusters = ClusterCaster(whole, cluster, a)
     faces = np.arange(a.num_faces)
-    sub = FaceSubsetCaster(whole, faces, a)
     for d in ([0.0, 1.0, 0.0], _unit([1.0, 0.05, 0.0]), _unit([0.3, 0.8, -0.2])):
-        np.testing.assert_array_equal(sun_shading(a, sub, d), sun_shading(mesh, whole, d)[faces])
-    assert np.all(sun_shading(a, sub, [0.0, 1.0, 0.0])[a.face_normals[:, 1] > 0.95] == 0.0)
+        np.testing.assert_array_equal(sun_shading(a, clusters, d), sun_shading(mesh, whole, d)[faces])
+    assert np.all(sun_shading(a, clusters, [0.0, 1.0, 0.0])[a.face_normals[:, 1] > 0.95] == 0.0)
     origins = np.array([[0.0, -5.0, 0.0], [0.0, 1.5, 0.0], [5.0, 0.0, 0.0]])
-    hit = sub.first_hit_faces(origins, np.array([[0.0, 1.0, 0.0]] * 3))
+    hit = clusters.first_hit_faces(origins, np.array([[0.0, 1.0, 0.0]] * 3))
     assert 0 <= hit[0] < a.num_faces and a.face_normals[hit[0], 1] < -0.9      # the lower sphere's bottom
     assert hit[1] == ELSEWHERE and hit[2] == MISS
-    with pytest.raises(InputError, match="sub-mesh of 80 faces"):
-        FaceSubsetCaster(whole, faces[:10], sphere(1))
+    # two faces in one cluster: a ray hitting either reports it
+    pair = np.where(np.arange(mesh.num_faces) == hit[0], 7, cluster)
+    assert ClusterCaster(whole, pair, a).first_hit_faces(origins[:1], np.array([[0.0, 1.0, 0.0]]))[0] == 7
+    with pytest.raises(InputError, match="indices below 80"):
+        ClusterCaster(whole, np.full(mesh.num_faces, 80), sphere(1))
 
 
 def test_brightest_direction_of_a_delta_light():

@@ -151,7 +151,7 @@ class RetinexSegmented(Method):
                 weight = np.zeros_like(weight)  # negligible: not applied
         est.info["coat_weight"] = weight.tolist()
         est.info["clustering_s"] = time.perf_counter() - t
-        return Solution(est, chosen, applied)
+        return Solution(est, chosen, applied, fits)
 
     def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None) -> tuple[Estimate, Hypothesis]:
         """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
@@ -165,7 +165,7 @@ class RetinexSegmented(Method):
         usable = np.all(np.isfinite(radiance) & (radiance > 0), axis=1) & (prep.c_matrix[:, 0] > 0)
         if not usable.any():
             raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
-        ctx = FitContext(prep, c, self.model, self.loss, fits, mesh.face_adjacency, usable,
+        ctx = FitContext(prep, c, self.model, self.loss, fits, prep.edges, usable,
                          dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
                               max_edges=c.retinex_max_edges))
         if c.interreflection:

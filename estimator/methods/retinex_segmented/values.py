@@ -38,6 +38,11 @@ class LightSource(str, Enum):
         """True when the light came from a reflection fit, which already holds the coat."""
         return self.value.startswith("reflection")
 
+    @property
+    def from_coat_map(self) -> bool:
+        """True when the light and the faces' diffuse radiance came from the coat's map."""
+        return self.models_the_coat and "lobe" not in self.value
+
 
 @dataclass(frozen=True)
 class Shading:
@@ -145,9 +150,10 @@ class CoatReflection:
 
 @dataclass
 class Solution:
-    """What a held solve found: the estimate, the hypothesis it came from, and the coat's
-    reflection subtracted before its fit (None: none)."""
+    """What a held solve found: the estimate, the hypothesis it came from, the coat's
+    reflection subtracted before its fit (None: none) and its view-dependent fits."""
 
     estimate: Estimate
     hypothesis: Hypothesis
     coat: CoatReflection | None
+    fits: ReflectionFits
