@@ -89,6 +89,20 @@ def default_held_and_streamed(tiny_sparse_data):
     return held, whole, clusters
 
 
+def test_a_held_mesh_denser_than_light_faces_takes_its_light_from_clusters(default_held_and_streamed,
+                                                                          tiny_sparse_data):
+    """Rows held, more observed faces than light_faces: the same clusters and estimate as
+    streamed; with coat_per_region (not carried from clusters to faces) the mesh is solved whole."""
+    _, _, streamed = default_held_and_streamed
+    data = tiny_sparse_data.data
+    held = estimate(data, "retinex-segmented", EstimatorConfig(**SMALL_DEFAULT, light_faces=640))
+    assert held.info["light_faces"] == 640
+    np.testing.assert_allclose(held.pseudo_sh, streamed.pseudo_sh, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(held.diffuse, streamed.diffuse, rtol=1e-6, atol=1e-9)
+    whole = estimate(data, "retinex-segmented", EstimatorConfig(**SMALL_DEFAULT, light_faces=640, coat_per_region=True))
+    assert "light_faces" not in whole.info
+
+
 def _psnr_and_ari(est, gt):
     o = est.observed
     return albedo_psnr(est.diffuse, gt.diffuse, o), adjusted_rand_index(gt.regions[o], est.labels[o])

@@ -15,7 +15,7 @@ from ...model.estimate import Estimate
 from ..base import Method, register_method
 from .decision import choose, light_hypotheses, prediction_cost
 from .result import to_estimate
-from .streamed import solve_streamed
+from .clusters import carried, solve_on_clusters
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
 
 
@@ -103,14 +103,14 @@ class RetinexSegmented(Method):
         if c.components == "specular":
             raise InputError("retinex-segmented estimates the diffuse albedo from shading; for specular-only "
                              "data (components='specular') use bilinear-per-face")
-        if prep.streamed:
-            return solve_streamed(self, prep)
+        if prep.streamed or (prep.obs.observed_faces().sum() > c.light_faces and not carried(c)):
+            return solve_on_clusters(self, prep)
         return self.solve_held(prep).estimate
 
     def solve_held(self, prep) -> Solution:
         """Steps 1-6 on a problem whose rows are held; the estimate with the hypothesis it came
-        from and the coat's reflection subtracted before it (what :func:`.streamed.solve_streamed`
-        carries to the faces of a larger problem)."""
+        from and the coat's reflection subtracted before it (what :func:`.clusters.extend`
+        carries from clusters to faces)."""
         c = self.config
         t = time.perf_counter()
         fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations

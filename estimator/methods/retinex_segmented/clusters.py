@@ -1,11 +1,14 @@
-"""``retinex-segmented`` on a problem too large to hold its rows (:attr:`Prepared.streamed`).
+"""``retinex-segmented`` on a mesh with more observed faces than ``light_faces``: a dense scan,
+or a problem too large to hold its rows (:attr:`Prepared.streamed`).
 
 The light, its sun, the coat's reflection and whether the faces form uniform regions are found
 on a problem of ``light_faces`` clusters of neighbouring faces (:func:`face_clusters`), whose
 rows are held: each cluster carries its faces' observations and is adjacent to the clusters
 its faces touch, so the edges and regions it sees span the whole object at the scale of a
-mesh of that many faces, however dense the mesh. Every face's albedo then follows with that
-light fixed, as the held solve divides radiance by shading, from rows computed in chunks. The
+mesh of that many faces, however dense the mesh (neighbouring faces of a dense mesh see too
+little of the light's variation between them). Every face's albedo then follows with that
+light fixed, as the held solve divides radiance by shading (from rows computed in chunks
+when they are streamed). The
 light has a few hundred unknowns, which tens of thousands of clusters determine many times
 over; the albedos are per face and need every face."""
 from __future__ import annotations
@@ -47,18 +50,24 @@ def face_clusters(mesh, observed: np.ndarray, count: int, seed: int = 0) -> tupl
     return cluster, representative
 
 
-def solve_streamed(method, prep: Prepared) -> Estimate:
-    """The estimate of ``method`` (a :class:`RetinexSegmented`) on the streamed problem
-    ``prep``: its held solve on ``config.light_faces`` clusters of faces
-    (:meth:`Prepared.clustered`), then :func:`extend` to every face."""
+def carried(config) -> str | None:
+    """The setting that is not carried from clusters to faces (``coat_per_region``: a coat per
+    region of the clusters; ``reflected_lobe``: the lobe's diffuse radiance), or None."""
+    return next((name for name in ("coat_per_region", "reflected_lobe") if getattr(config, name)), None)
+
+
+def solve_on_clusters(method, prep: Prepared) -> Estimate:
+    """The estimate of ``method`` (a :class:`RetinexSegmented`): its held solve on
+    ``config.light_faces`` clusters of faces (:meth:`Prepared.clustered`), then :func:`extend`
+    to every face; refused with a setting :func:`carried` names."""
     c = method.config
-    if c.coat_per_region or c.reflected_lobe:
-        setting = "coat_per_region" if c.coat_per_region else "reflected_lobe"
+    setting = carried(c)
+    if setting:
         raise InputError(f"{setting} is not carried from the clusters a streamed problem's light is found on to "
                          f"its faces: set {setting}=false, or raise dense_rows so that the rows are held")
     cluster, representative = face_clusters(prep.data.mesh, np.nonzero(prep.obs.observed_faces())[0],
                                             c.light_faces)
-    method.log(f"streamed: the light from {len(representative)} clusters of faces")
+    method.log(f"the light from {len(representative)} clusters of faces")
     part = method.solve_held(prep.clustered(cluster, representative))
     est = extend(method, prep, part)
     est.info.update({k: part.estimate.info[k] for k in CARRIED if k in part.estimate.info})

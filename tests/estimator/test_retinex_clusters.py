@@ -1,10 +1,10 @@
-"""The clusters of faces a streamed ``retinex-segmented`` finds its light on (:func:`face_clusters`),
+"""The clusters of faces ``retinex-segmented`` finds its light on beyond ``light_faces`` (:func:`face_clusters`),
 and the observations merged per cluster and view (:meth:`Observations.merged`)."""
 from __future__ import annotations
 
 import numpy as np
 
-from estimator.methods.retinex_segmented.streamed import face_clusters
+from estimator.methods.retinex_segmented.clusters import face_clusters
 from estimator.pipeline.observations import Observations
 
 from .meshes import sphere
