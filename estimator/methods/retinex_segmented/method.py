@@ -13,9 +13,9 @@ from ...core.settings import Section
 from ...light import coat, indirect, sun
 from ...model.estimate import Estimate
 from ..base import Method, register_method
+from .clusters import carried, solve_on_clusters
 from .decision import choose, light_hypotheses, prediction_cost
 from .result import to_estimate
-from .clusters import carried, solve_on_clusters
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
 
 
