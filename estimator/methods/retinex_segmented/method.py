@@ -92,6 +92,10 @@ class RetinexSegmented(Method):
     Phong lobe's (:mod:`estimator.light.lobe_light`) are each turned into an estimate, and the
     one that best predicts the observations, at the Bayesian information criterion's price
     per unknown, is kept (:mod:`.decision`); step 6 is skipped when it models the coat.
+
+    On a mesh with more observed faces than ``light_faces`` (a dense scan), or whose rows are
+    streamed, steps 1-6 run on that many clusters of faces and every face's albedo follows
+    under their light (:mod:`.clusters`).
     """
 
     name = "retinex-segmented"
