@@ -3,14 +3,13 @@ or a problem too large to hold its rows (:attr:`Prepared.streamed`).
 
 The light, its sun, the coat's reflection and whether the faces form uniform regions are found
 on a problem of ``light_faces`` clusters of neighbouring faces (:func:`face_clusters`), whose
-rows are held: each cluster carries its faces' observations and is adjacent to the clusters
-its faces touch, so the edges and regions it sees span the whole object at the scale of a
-mesh of that many faces, however dense the mesh (neighbouring faces of a dense mesh see too
-little of the light's variation between them). Every face's albedo then follows with that
-light fixed, as the held solve divides radiance by shading (from rows computed in chunks
-when they are streamed). The
-light has a few hundred unknowns, which tens of thousands of clusters determine many times
-over; the albedos are per face and need every face."""
+rows are held: each cluster shows its faces' mean colour per view and touches the clusters its
+faces touch, so the edges and regions it sees span the whole object at the scale of a mesh of
+that many faces, however dense the mesh (neighbouring faces of a dense mesh see too little of
+the light's variation between them). Every face's albedo then follows with that light fixed,
+as the held solve divides radiance by shading (from rows computed in chunks when they are
+streamed). The light has a few hundred unknowns, which tens of thousands of clusters determine
+many times over; the albedos are per face and need every face."""
 from __future__ import annotations
 
 from dataclasses import replace
