@@ -46,12 +46,9 @@ def albedo_features(albedo: np.ndarray) -> np.ndarray:
     return np.column_stack([np.log(level), 0.5 * albedo / level[:, None]])
 
 
-MIN_UNIFORM_FACES = 10   # the fewest faces a component needs to be called uniform (its spread is a statistic)
-
-
 def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
             threshold: float = SegmentationConfig.segment_threshold,
-            uniform_spread: float = SegmentationConfig.uniform_spread, min_size: int = MIN_UNIFORM_FACES,
+            uniform_spread: float = SegmentationConfig.uniform_spread, min_size: int = 10,
             merge_bandwidth: float = 0.12, merge: str = "mean-shift") -> tuple[np.ndarray, np.ndarray]:
     """Uniform-albedo regions on the face-adjacency graph.
 
