@@ -3,12 +3,13 @@ bunny, the bunny subdivided until a face covers about a pixel, one fresh process
 so each peak RSS is that case's own.
 
     python benchmarks/dense_scan.py [--seeds 1047,1029,1006] [--subdivisions 2] [--views 30]
-                                    [--out DIR] [--set KEY=VALUE ...]
+                                    [--resolution N] [--out DIR] [--set KEY=VALUE ...]
 
 Each seed must draw the bunny (:func:`harness.scene.random_family.draw`); its light,
 material, albedo and camera layout are kept, the mesh is the shipped 3,674-face bunny
 subdivided ``--subdivisions`` times (midpoints: 4^s x 3,674 faces; 2 gives 58,784, about one
-pixel each at 256²), seen from ``--views`` cameras. Prints per seed: faces, the faces seen
+pixel each at 256²), seen from ``--views`` cameras (``--resolution``: their width and height
+instead of the draw's, e.g. 1024 to score the same scene at 4x the resolution). Prints per seed: faces, the faces seen
 through pixel centres only (``info["unresolved_faces"]``), the estimated share, diffuse PSNR
 after a per-channel least-squares scale, the share within ±10 %, ARI on uniform regions,
 time per stage and peak RSS. Rows go to DIR/dense_scan.json.
@@ -66,6 +67,7 @@ def main() -> None:
     p.add_argument("--seeds", default="1047,1029,1006")
     p.add_argument("--subdivisions", type=int, default=2)
     p.add_argument("--views", type=int, default=30)
+    p.add_argument("--resolution", type=int, default=None, help="image width and height (default: the draw's)")
     p.add_argument("--out", default="out/bench-dense")
     p.add_argument("--set", type=setting, action="append", default=[], metavar="KEY=VALUE")
     args = p.parse_args()
@@ -79,9 +81,13 @@ def main() -> None:
         strata = draw(seed)[1]
         if strata["geometry"] != "bunny":
             raise SystemExit(f"seed {seed} draws the {strata['geometry']}, not the bunny: pick another seed")
-        folder = os.path.join(out, f"dense-s{args.subdivisions}-{seed:04d}")
+        size = "" if args.resolution is None else f"-{args.resolution}px"
+        folder = os.path.join(out, f"dense-s{args.subdivisions}-{seed:04d}{size}")
         if not os.path.isdir(folder):
-            generate(random_spec(seed, None, {"geometry.file": mesh, "cameras.count": args.views}), folder)
+            overrides = {"geometry.file": mesh, "cameras.count": args.views}
+            if args.resolution is not None:
+                overrides.update({"cameras.width": args.resolution, "cameras.height": args.resolution})
+            generate(random_spec(seed, None, overrides), folder)
         run = subprocess.run([sys.executable, "-c", ESTIMATE.format(root=ROOT, folder=folder,
                                                                     overrides=dict(args.set))],
                              capture_output=True, text=True)
