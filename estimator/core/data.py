@@ -7,6 +7,7 @@ so the estimator works on any data source. The result type is
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -68,9 +69,10 @@ class TriangleMesh:
         length = np.linalg.norm(n, axis=1, keepdims=True)
         return n / np.where(length > 0, length, 1.0)
 
-    @property
+    @cached_property
     def face_adjacency(self) -> np.ndarray:
-        """(E, 2) int64 pairs of faces that share an edge (each pair once, lower index first)."""
+        """(E, 2) int64 pairs of faces that share an edge (each pair once, lower index first);
+        computed once per mesh (about 2 s at 1.3 M faces) and read-only."""
         f = self.faces
         edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
         owner = np.tile(np.arange(len(f)), 3)
@@ -79,7 +81,9 @@ class TriangleMesh:
         same = np.all(edges[1:] == edges[:-1], axis=1)
         pairs = np.stack([owner[:-1][same], owner[1:][same]], axis=1)
         pairs = np.sort(pairs, axis=1)
-        return np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
+        pairs = np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
+        pairs.setflags(write=False)
+        return pairs
 
     @property
     def bounds_centre(self) -> np.ndarray:

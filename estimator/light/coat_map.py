@@ -190,15 +190,11 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
         raise InputError(f"the coat's ior must exceed 1, got {ior}")
     if height < 3 or width < 2:
         raise InputError(f"the light map needs at least 3 x 2 vertices, got {height} x {width}")
-    n = normals[face]
-    cos = np.sum(n * view_dir, axis=1)
-    mirror = mirror_directions(n, view_dir)
-    keep = (cos > 0) & visibility.lookup(face, sampling.nearest(mirror))
-    face, rgb, cos, mirror = face[keep], rgb[keep], cos[keep], mirror[keep]
+    keep, mirror, fresnel = _reflecting_rows(face, view_dir, normals, sampling, visibility, ior)
+    face, rgb = face[keep], rgb[keep]
     rows = len(face)
     if rows == 0:
         raise InputError("no observation sees the light reflected by the coat (every mirror direction is blocked)")
-    fresnel = fresnel_dielectric(cos, ior)
     transmit = 1.0 - fresnel
     a = sparse.diags(fresnel) @ bilinear_rows(mirror, height, width)          # (N, H*W)
     b = sparse.csr_matrix((transmit, (np.arange(rows), face)), shape=(rows, n_faces))
@@ -239,13 +235,9 @@ def diffuse_radiance(fitted: ReflectedLight, face: np.ndarray, rgb: np.ndarray, 
     (``face``, ``rgb``, ``view_dir``: (N,), (N, 3), (N, 3)) of faces the map was not fitted on
     are welcome: this is how a map fitted on part of a mesh reaches the rest."""
     face = np.asarray(face, dtype=np.int64)
-    n = normals[face]
-    cos = np.sum(n * view_dir, axis=1)
-    mirror = mirror_directions(n, view_dir)
-    keep = (cos > 0) & visibility.lookup(face, sampling.nearest(mirror))
-    face, rgb, cos, mirror = face[keep], rgb[keep], cos[keep], mirror[keep]
+    keep, mirror, fresnel = _reflecting_rows(face, view_dir, normals, sampling, visibility, ior)
+    face, rgb = face[keep], rgb[keep]
     height, width = fitted.radiance.shape[:2]
-    fresnel = fresnel_dielectric(cos, ior)
     transmit = 1.0 - fresnel
     values = rgb - fresnel[:, None] * (bilinear_rows(mirror, height, width) @ fitted.radiance.reshape(-1, 3))
     count = len(normals)
@@ -262,6 +254,17 @@ def diffuse_radiance(fitted: ReflectedLight, face: np.ndarray, rgb: np.ndarray, 
             weights = robust.irls_weights(residual, loss, robust.robust_scale(residual, floor=1e-12))
         diffuse[denominator > 0, c] = level[denominator > 0]
     return diffuse
+
+
+def _reflecting_rows(face, view_dir, normals, sampling, visibility, ior):
+    """The rows that see the light the coat reflects: (N,) bool, facing the camera with an
+    unblocked mirror direction; for those rows (n, 3) the mirror directions and (n,) the
+    coat's Fresnel reflectance."""
+    n = normals[face]
+    cos = np.sum(n * view_dir, axis=1)
+    mirror = mirror_directions(n, view_dir)
+    keep = (cos > 0) & visibility.lookup(face, sampling.nearest(mirror))
+    return keep, mirror[keep], fresnel_dielectric(cos[keep], ior)
 
 
 def _project_off_faces(a, y, b, weights):

@@ -156,9 +156,10 @@ class Prepared:
         (:meth:`Observations.merged`), where ``cluster`` (F,) gives each face's cluster (-1:
         left out); its diffuse row is its faces' area-weighted mean row (the merged colour's
         shading), its other geometry (normal, shadow function, specular rows, the rays of a
-        sun or of the light the object reflects) that of the face ``representative[k]`` (K,). Clusters are
-        adjacent where two of their faces are (:attr:`edges`). The caster traces the whole
-        mesh (:class:`~estimator.rays.raycast.ClusterCaster`): every face casts its shadow."""
+        sun or of the light the object reflects) that of the face ``representative[k]`` (K,).
+        Clusters are adjacent where two of their faces are (:attr:`edges`). The caster traces
+        the whole mesh (:class:`~estimator.rays.raycast.ClusterCaster`): every face casts its
+        shadow."""
         whole = self.data.mesh
         vertices, corners = np.unique(whole.faces[representative], return_inverse=True)
         mesh = TriangleMesh(whole.vertices[vertices], corners.reshape(-1, 3))

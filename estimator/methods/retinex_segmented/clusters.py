@@ -87,7 +87,7 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
     mesh, obs = prep.data.mesh, prep.obs
     if part.coat is not None:
         rows = coat.coat_rows(mesh.face_normals[obs.face], obs.view_dir, part.coat.light, c.coat_order, c.coat_ior)
-        obs = replace(obs, rgb=obs.rgb - part.coat.weight[0] * rows)
+        obs = replace(obs, rgb=obs.rgb - part.coat.weight[0] * rows)   # one coat group: coat_per_region is not carried
         prep = replace(prep, obs=obs)
     f = mesh.num_faces
     radiance = group_quantile(obs.face, obs.rgb, f, c.retinex_quantile)

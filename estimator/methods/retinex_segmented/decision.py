@@ -92,12 +92,11 @@ def held_out(residuals: np.ndarray, est: Estimate, face: np.ndarray) -> np.ndarr
     return np.where(n > 1, residuals * n / np.maximum(n - 1, 1), np.inf)
 
 
-def choose(prep: Prepared, hypotheses: list[Hypothesis], estimates: list[Estimate]) -> Estimate:
-    """The estimate of least :func:`prediction_cost`; every hypothesis' source and cost are
-    recorded in its ``info['hypotheses']``."""
+def choose(prep: Prepared, hypotheses: list[Hypothesis], estimates: list[Estimate]) -> int:
+    """The index of the estimate of least :func:`prediction_cost`; every hypothesis' source and
+    cost are recorded in that estimate's ``info['hypotheses']``."""
     costs = prediction_cost(prep, estimates) if len(estimates) > 1 else np.zeros(1)
     best = int(np.argmin(costs))
-    chosen = estimates[best]
-    chosen.info["hypotheses"] = [{"light_from": h.source.value, "cost": float(cost), "chosen": i == best}
-                                 for i, (h, cost) in enumerate(zip(hypotheses, costs))]
-    return chosen
+    estimates[best].info["hypotheses"] = [{"light_from": h.source.value, "cost": float(cost), "chosen": i == best}
+                                          for i, (h, cost) in enumerate(zip(hypotheses, costs))]
+    return best

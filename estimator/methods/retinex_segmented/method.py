@@ -145,7 +145,7 @@ class RetinexSegmented(Method):
                 costs = prediction_cost(prep, [est, coated], [None, reflection],
                                         [0, len(np.unique(group[obs.face])) + 2])
                 if costs[1] < costs[0]:
-                    est, chosen, applied = coated, coated_chosen, CoatReflection(est.light, weight, group)
+                    est, chosen, applied = coated, coated_chosen, CoatReflection(est.light, weight)
                 else:
                     weight = np.zeros_like(weight)  # the coat does not pay its way: not applied
                 self.log(f"coat's reflection {'removed' if costs[1] < costs[0] else 'not removed'} (cost "
@@ -177,5 +177,5 @@ class RetinexSegmented(Method):
                 prep.caster, prep.sampling, prep.visibility, np.where(usable[:, None], radiance, 0.0))
         hypotheses = light_hypotheses(ctx, radiance, found)
         estimates = [to_estimate(ctx, h, self) for h in hypotheses]
-        chosen = choose(prep, hypotheses, estimates)
-        return chosen, hypotheses[[e is chosen for e in estimates].index(True)]
+        best = choose(prep, hypotheses, estimates)
+        return estimates[best], hypotheses[best]

@@ -133,19 +133,18 @@ class FitContext:
 
 @dataclass(frozen=True)
 class CoatReflection:
-    """The coat's reflection a solve subtracted from the colours: observation k of face f
-    loses ``weight[group[f]] * coat.coat_rows(normal, view, light)[k]``.
+    """The coat's reflection a solve subtracted from the colours: observation k of a face in
+    coat group g loses ``weight[g] * coat.coat_rows(normal, view, light)[k]``.
 
     Attributes
     ----------
     light : (M, 3) the light whose low orders the coat reflects (the first fit's).
-    weight : (G, 3) the coat's colour per coat group.
-    group : (F,) the coat group of each face.
+    weight : (G, 3) the coat's colour per coat group (:func:`.method.coat_groups`; one group
+        unless ``coat_per_region``).
     """
 
     light: np.ndarray
     weight: np.ndarray
-    group: np.ndarray
 
 
 @dataclass
