@@ -49,6 +49,10 @@ def degrees(order: int) -> np.ndarray:
     return np.repeat(np.arange(order + 1), 2 * np.arange(order + 1) + 1)
 
 
+# directions per block of :func:`basis`: its (coefficients, block) scratch stays in cache
+BASIS_BLOCK = 4096
+
+
 def basis(order: int, dirs: np.ndarray) -> np.ndarray:
     """Real SH basis at unit directions.
 
@@ -64,9 +68,26 @@ def basis(order: int, dirs: np.ndarray) -> np.ndarray:
     d = np.asarray(dirs, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] != 3:
         raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
-    x, y, z = d[:, 0], d[:, 1], d[:, 2]
-    out = np.empty((d.shape[0], num_coeffs(order)))
-    xy = np.ones_like(x) + 0j  # (x + i y)^m
+    n, m = d.shape[0], num_coeffs(order)
+    out = np.empty((n, m))
+    # each coefficient is written as a contiguous row of a (coefficients, block) scratch, then
+    # the block is transposed into the output: writing the columns of an (N, M) array directly
+    # touches N cache lines per coefficient (2.3x slower at order 10)
+    scratch = np.empty((m, min(BASIS_BLOCK, n)))
+    scale = [[np.sqrt((2 * l + 1) / (4 * np.pi) * np.exp(special.gammaln(l - mm + 1) - special.gammaln(l + mm + 1)))
+              for l in range(order + 1)] for mm in range(order + 1)]
+    for start in range(0, n, BASIS_BLOCK):
+        stop = min(start + BASIS_BLOCK, n)
+        block = scratch[:, : stop - start]
+        _basis_rows(order, *(d[start:stop, k].copy() for k in range(3)), scale, block)
+        out[start:stop] = block.T
+    return out
+
+
+def _basis_rows(order: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, scale: list, out: np.ndarray) -> None:
+    """Fill ``out`` ((L + 1)^2, N) with the basis at directions (x, y, z) (N,) each;
+    ``scale[m][l]`` is the normalisation of (l, m)."""
+    re, im = np.ones_like(x), np.zeros_like(x)   # (x + i y)^m
     for m in range(order + 1):
         # Q_l^m(z) = P_l^m(z) / sin^m(theta) without Condon-Shortley phase.
         q_prev, q = None, np.full_like(z, special.factorial2(2 * m - 1, exact=False) if m else 1.0)
@@ -75,14 +96,13 @@ def basis(order: int, dirs: np.ndarray) -> np.ndarray:
                 q_prev, q = q, (2 * m + 1) * z * q
             elif l > m + 1:
                 q_prev, q = q, ((2 * l - 1) * z * q - (l + m - 1) * q_prev) / (l - m)
-            k = np.sqrt((2 * l + 1) / (4 * np.pi) * np.exp(special.gammaln(l - m + 1) - special.gammaln(l + m + 1)))
             if m == 0:
-                out[:, index(l, 0)] = k * q
+                np.multiply(q, scale[m][l], out=out[index(l, 0)])
             else:
-                out[:, index(l, m)] = np.sqrt(2.0) * k * q * xy.real
-                out[:, index(l, -m)] = np.sqrt(2.0) * k * q * xy.imag
-        xy = xy * (x + 1j * y)
-    return out
+                kq = (np.sqrt(2.0) * scale[m][l]) * q
+                np.multiply(kq, re, out=out[index(l, m)])
+                np.multiply(kq, im, out=out[index(l, -m)])
+        re, im = re * x - im * y, re * y + im * x
 
 
 def rotation_matrix(order: int, rotation: np.ndarray) -> np.ndarray:

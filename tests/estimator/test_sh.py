@@ -16,6 +16,16 @@ def test_basis_matches_scipy_complex_sph_harm():
             np.testing.assert_allclose(y[:, sh.index(l, m)], ref, atol=1e-12)
 
 
+def test_basis_in_blocks_equals_the_basis_of_each_direction_alone():
+    # more directions than one block: every row must be the basis of its own direction
+    d = sh.fibonacci_sphere(sh.BASIS_BLOCK + 37)
+    y = sh.basis(6, d)
+    assert y.shape == (len(d), 49) and y.flags.c_contiguous
+    rows = [0, sh.BASIS_BLOCK - 1, sh.BASIS_BLOCK, len(d) - 1]
+    np.testing.assert_allclose(y[rows], np.concatenate([sh.basis(6, d[[k]]) for k in rows]), atol=1e-14)
+    assert sh.basis(3, np.zeros((0, 3))).shape == (0, 16)
+
+
 def test_order_one_sign_convention():
     c = np.sqrt(3 / (4 * np.pi))
     y = sh.basis(1, np.eye(3))
