@@ -103,9 +103,9 @@ def _solve_albedos(r, a, b, group, num_groups, components, ridge=1e-12):
     return np.maximum(td, 0), np.maximum(ts, 0)
 
 
-def _features(components: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, P) columns multiplying the unknown albedos of each row."""
-    return {"both": np.stack([a, b], 1), "specular": b[:, None], "diffuse": a[:, None]}[components]
+def _component_rows(components: str, c_rows: np.ndarray, d_rows: np.ndarray) -> list[np.ndarray]:
+    """The (N, M) rows each unknown albedo of a group multiplies, in the albedos' order."""
+    return {"both": [c_rows, d_rows], "specular": [d_rows], "diffuse": [c_rows]}[components]
 
 
 def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterations, tol, residuals, norm,
@@ -116,28 +116,29 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
     raise, lower, max) damping. Returns refined (alb, h).
     """
     lam, lam_raise, lam_lower, lam_max = schedule
+    rows = _component_rows(components, c_rows, d_rows)
     indicator = sparse.csr_matrix((np.ones(len(group)), (group, np.arange(len(group)))),
                                   shape=(num_groups, len(group)))
+    # the (N, M) Jacobian and one product are refilled in place every step: a fresh array of
+    # this size costs more in page faults than the arithmetic that fills it
+    jac, scratch = np.empty(c_rows.shape), np.empty(c_rows.shape)
 
     def model(alb_, h_):
-        feats = _features(components, c_rows @ h_, d_rows @ h_)
+        feats = np.stack([x @ h_ for x in rows], 1)                           # (N, P)
         return feats, np.sum(alb_[group] * feats, axis=1)
-
-    def light_jacobian(alb_):
-        if components == "both":
-            return alb_[group, 0, None] * c_rows + alb_[group, 1, None] * d_rows
-        return alb_[group, 0, None] * (d_rows if components == "specular" else c_rows)
 
     feats, pred = model(alb, h)
     cost = float(np.sum((r - pred) ** 2))
     m, p = len(h), alb.shape[1]
     for _ in range(iterations):
         e = r - pred
-        jac = light_jacobian(alb)                                              # (N, M)
+        np.multiply(rows[0], alb[group, 0, None], out=jac)                     # d pred / d h
+        for i in range(1, p):
+            jac += np.multiply(rows[i], alb[group, i, None], out=scratch)
         u = np.stack([np.stack([np.bincount(group, feats[:, i] * feats[:, j], minlength=num_groups)
                                 for j in range(p)], -1) for i in range(p)], -2)  # (G, P, P)
         g_alb = np.stack([np.bincount(group, feats[:, i] * e, minlength=num_groups) for i in range(p)], -1)
-        w = np.stack([indicator @ (feats[:, i, None] * jac) for i in range(p)], 1)  # (G, P, M)
+        w = np.stack([indicator @ np.multiply(jac, feats[:, i, None], out=scratch) for i in range(p)], 1)  # (G, P, M)
         v = jac.T @ jac
         g_h = jac.T @ e
         while True:
@@ -145,8 +146,9 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
             v_d = v + lam * np.diag(np.diag(v)) + 1e-12 * np.trace(v) / m * np.eye(m)
             u_inv = np.linalg.inv(u_d)
             u_inv_w = u_inv @ w                                                # (G, P, M)
-            schur = v_d - np.einsum("gpm,gpn->mn", w, u_inv_w)
-            rhs = g_h - np.einsum("gpm,gp->m", w, np.einsum("gpq,gq->gp", u_inv, g_alb))
+            # one GEMM over the (group, component) rows: einsum's contraction does not use BLAS
+            schur = v_d - w.reshape(-1, m).T @ u_inv_w.reshape(-1, m)
+            rhs = g_h - w.reshape(-1, m).T @ np.einsum("gpq,gq->gp", u_inv, g_alb).reshape(-1)
             dh = np.linalg.solve(schur, rhs)
             dalb = np.einsum("gpq,gq->gp", u_inv, g_alb - w @ dh)
             alb_new, h_new = np.maximum(alb + dalb, 0.0), h + dh
@@ -223,13 +225,16 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
         pred = td[group] * (c_rows @ h) + ts[group] * (d_rows @ h)
         return float(np.linalg.norm(rgb - pred) / norm)
 
+    # the unknown albedos (views of td and ts, filled in place) and the rows each multiplies
+    albedos = {"both": (td, ts), "specular": (ts,), "diffuse": (td,)}[components]
+    component_rows = _component_rows(components, c_rows, d_rows)
     for _ in range(1 if fixed_light is not None else als_iterations):
         for ch in range(3):
             td[:, ch], ts[:, ch] = _solve_albedos(rgb[:, ch], c_rows @ h[:, ch], d_rows @ h[:, ch],
                                                   group, num_groups, components)
         if fixed_light is None:
             for ch in range(3):
-                rows = td[group, ch, None] * c_rows + ts[group, ch, None] * d_rows
+                rows = sum(a[group, ch, None] * x for a, x in zip(albedos, component_rows))
                 gram = rows.T @ rows
                 gram[np.diag_indices(m)] += ridge * np.trace(gram) / m
                 h[:, ch] = np.linalg.solve(gram, rows.T @ rgb[:, ch])
