@@ -118,7 +118,8 @@ class Method(ABC):
         if self.loss == "none":
             return np.ones(len(obs.face))
         g = face_group[obs.face]
-        predicted = self.model.predict(result.diffuse[g], result.specular[g], prep.c_rows, prep.d_rows, result.light)
+        predicted = self.model.predict(result.diffuse[g], result.specular[g], prep.c_rows @ result.light,
+                                       prep.d_rows @ result.light)
         r = robust.relative_residuals(obs.rgb, predicted)
         return robust.irls_weights(r, self.loss, robust.robust_scale(r, base))
 

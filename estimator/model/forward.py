@@ -59,7 +59,8 @@ class Predictor:
         f = face[hit]
         mirror = mirror_directions(self.mesh.face_normals[f], -dirs[hit])
         d_rows = self.model.specular_rows(f, mirror, self.sampling, self.visibility)
-        value = self.model.predict(est.diffuse[f], est.specular[f], self.c_matrix[f], d_rows, self.light(rotation))
+        light = self.light(rotation)
+        value = self.model.predict(est.diffuse[f], est.specular[f], (self.c_matrix @ light)[f], d_rows @ light)
         rgb = np.zeros((camera.height * camera.width, 3), dtype=np.float32)
         rgb[hit] = value
         coverage = (face >= 0).astype(np.float32)

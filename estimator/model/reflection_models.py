@@ -135,13 +135,12 @@ class ReflectionModel(ABC):
         return pseudo, "the pseudo illumination SH (known_sh)"
 
     @staticmethod
-    def predict(diffuse: np.ndarray, specular: np.ndarray, c_rows: np.ndarray, d_rows: np.ndarray,
-                light: np.ndarray) -> np.ndarray:
-        """(N, 3) colours of N observations: t_d (C . x) + t_s (D . x).
-
-        diffuse, specular : (N, 3) albedos; c_rows, d_rows : (N, M); light : (M, 3).
-        """
-        return diffuse * (c_rows @ light) + specular * (d_rows @ light)
+    def predict(diffuse: np.ndarray, specular: np.ndarray, diffuse_shading: np.ndarray,
+                specular_shading: np.ndarray) -> np.ndarray:
+        """(N, 3) colours of N observations: t_d (C . x) + t_s (D . x), from the shadings
+        C . x and D . x (N, 3) (a face's diffuse shading is the same in every view, so a
+        caller takes it once per face) and the albedos t_d, t_s (N, 3)."""
+        return diffuse * diffuse_shading + specular * specular_shading
 
     def mitsuba_material(self) -> MitsubaMaterial:
         """The BSDF that renders this model in Mitsuba, lit by the light unknown as environment."""

@@ -67,7 +67,7 @@ def test_rows_of_the_three_models_agree_where_they_should():
     d_rows = PaperModel(cfg).specular_rows(faces, mirror_directions(mesh.face_normals[faces], view), sampling, vis)
     light = np.random.default_rng(1).standard_normal((25, 3))
     td, ts = np.full((5, 3), 0.3), np.full((5, 3), 0.2)
-    np.testing.assert_allclose(PaperModel.predict(td, ts, c_paper[faces], d_rows, light),
+    np.testing.assert_allclose(PaperModel.predict(td, ts, c_paper[faces] @ light, d_rows @ light),
                                td * (c_paper[faces] @ light) + ts * (d_rows @ light))
 
 
