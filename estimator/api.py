@@ -50,7 +50,7 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     poses, rounds, offsets = None, config.pose_rounds, None
     if caster is not None and caster.mesh is not data.mesh:
         raise InputError("estimate: the caster was built for another mesh than data.mesh")
-    # one for the pose check, the refinement's held-out estimates and the solve: each view's
+    # one for the pose check, the refinement and the solve: each view's
     # face-ID buffers are traced once per camera
     caster = caster or RayCaster(data.mesh, config.variant)
     if rounds == 0 and config.auto_pose > 0 and len(data.views) >= 2:

@@ -36,13 +36,17 @@ from ..solvers.robust import TUNING, irls_weights, robust_scale
 # view is about 13 pixels, inside the first level's basin
 POSE_SCALES = (8.0, 4.0, 2.0, 1.0)
 SILHOUETTE_SCALES = (16.0, 8.0, 4.0, 2.0)   # the first, silhouette-only move
-POSE_ROUNDS = 2          # alignment rounds against held-out estimates
+POSE_ROUNDS = 2          # alignment rounds against held-out predictions
 POSE_STEPS = 10          # Gauss-Newton steps per level
 POSE_MAX_DEGREES = 10.0  # a correction beyond this turn, or beyond POSE_MAX_SHIFT x the distance to
 POSE_MAX_SHIFT = 0.25    # the mesh, is a divergence (against a poor estimate), not a calibration error
-POSE_MIN_GAIN = 1e-4     # a level stops when a step lowers the cost by less than this share
-POSE_MIN_VIEWS = 3       # a held-out estimate from fewer views is too poor to align with
+POSE_MIN_GAIN = 1e-4     # a level stops when a step lowers the cost by less than this share,
+POSE_MIN_MOVE = 0.01     # or moves no point by more than this many pixels (far below what a pose is judged at)
+POSE_MIN_VIEWS = 3       # albedos from fewer views are too poor to align with
 POSE_LEVEL_POINTS = 10   # a blurred level with fewer sampled points is skipped
+# points sampled per level at most: six unknowns are pinned by a few thousand pixels (the
+# pose's standard error falls as 1 / sqrt(points)), and a denser grid only costs time
+POSE_MAX_POINTS = 4096
 POSE_MIN_POINTS = 200    # a view with fewer covered pixels keeps its pose
 
 
@@ -54,8 +58,9 @@ class PoseConfig(Section):
     ----------
     pose_rounds : rounds of refinement (0 trusts the cameras): each camera first moves so
         the mesh's silhouette matches the view's alpha, then each round the views are split
-        into ``pose_folds`` interleaved groups and each group is aligned with the image an
-        estimate from the other groups predicts.
+        into ``pose_folds`` interleaved groups and each view is aligned with the estimate's
+        image of it, its faces' albedos taken from the other groups
+        (:func:`held_out_predictions`).
     pose_folds : view groups per round.
     auto_pose : with ``pose_rounds`` 0, the poses are refined anyway (:data:`POSE_ROUNDS`
         rounds) when any view's alpha outline lies more than this many pixels from the
@@ -130,24 +135,45 @@ def _sample(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return top * (1.0 - fy) + bottom * fy
 
 
-def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
-    return gaussian_filter(image.astype(np.float32), sigma=(sigma, sigma, 0), mode="constant")
+def _blur(image: np.ndarray, sigma: float) -> tuple[np.ndarray, int]:
+    """``image`` (H, W, C) blurred by a Gaussian of ``sigma`` pixels, held at 1/f of its
+    resolution (f the largest power of 2 up to sigma / 2): the mean of f x f blocks, then a
+    Gaussian of the variance the blocks leave, (sigma^2 - (f^2 - 1) / 12) / f^2 in the coarse
+    pixels. A coarse pixel's centre lies at f x its coordinates (:func:`_sample` at xy / f).
+    A wide Gaussian at full resolution would cost sigma x more for the same smooth image.
+
+    Returns
+    -------
+    (ceil(H / f), ceil(W / f), C) float32 image and f.
+    """
+    f = 1
+    while 4 * f <= sigma:
+        f *= 2
+    image = image.astype(np.float32)
+    if f > 1:   # zero-padded to whole blocks, as the blur's border is zero
+        height, width = -(-image.shape[0] // f), -(-image.shape[1] // f)
+        padded = np.zeros((height * f, width * f, image.shape[2]), dtype=np.float32)
+        padded[:image.shape[0], :image.shape[1]] = image
+        image = padded.reshape(height, f, width, f, -1).mean(axis=(1, 3))
+    rest = np.sqrt(max(sigma ** 2 - (f ** 2 - 1) / 12.0, 0.0)) / f
+    return gaussian_filter(image, sigma=(rest, rest, 0), mode="constant"), f
 
 
-def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray, camera: Camera,
+def _align(observed: np.ndarray, factor: int, template: np.ndarray, points_world: np.ndarray, camera: Camera,
            steps: int, free: np.ndarray, fallback: Camera | None = None) -> tuple[Camera, float, float]:
     """Damped Gauss-Newton alignment at one level of the parameters where ``free`` (6,) bool
     is set, from ``camera`` or from ``fallback`` when that fits this level better (so the
-    result never fits worse than either); returns (camera, cost before, cost after)."""
+    result never fits worse than either); ``observed`` is the level's image at 1/``factor``
+    of the camera's resolution (:func:`_blur`). Returns (camera, cost before, cost after)."""
     grad_row, grad_col = np.gradient(observed, axis=(0, 1))
-    gradients = np.concatenate([grad_col, grad_row], axis=2)        # (H, W, 2C)
+    gradients = np.concatenate([grad_col, grad_row], axis=2) / factor   # (H', W', 2C) per camera pixel
     channels = observed.shape[2]
     scale = max(float(np.median(np.abs(template))), 1e-6)
 
     def residual(cam: Camera):
         xy, depth = cam.project(points_world)
         inside = (depth > 0) & (xy[:, 0] >= 0) & (xy[:, 0] <= cam.width) & (xy[:, 1] >= 0) & (xy[:, 1] <= cam.height)
-        r = np.where(inside[:, None], _sample(observed, xy) - template, 0.0) / scale
+        r = np.where(inside[:, None], _sample(observed, xy / factor) - template, 0.0) / scale
         return r, xy, inside
 
     pivot_world = points_world.mean(axis=0)   # the camera turns about the seen surface's centre
@@ -168,7 +194,7 @@ def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray,
         p_cam = points_world @ w2c[:3, :3].T + w2c[:3, 3]
         pivot = w2c[:3, :3] @ pivot_world + w2c[:3, 3]
         j_pix = projection_jacobian(p_cam, pivot, cam.fx, cam.fy)                      # (N, 2, 6)
-        g = _sample(gradients, xy).reshape(-1, 2, channels)                     # (N, 2, C)
+        g = _sample(gradients, xy / factor).reshape(-1, 2, channels)            # (N, 2, C)
         jac = (g[:, 0, :, None] * j_pix[:, 0, None, :] + g[:, 1, :, None] * j_pix[:, 1, None, :]) / scale
         w = irls_weights(np.linalg.norm(r, axis=1), "cauchy", spread) * inside
         jac = jac.reshape(-1, 6)[:, free]
@@ -186,50 +212,53 @@ def _align(observed: np.ndarray, template: np.ndarray, points_world: np.ndarray,
             c_t = cost(r_t)
             if c_t < current:
                 gain = 1.0 - c_t / current
+                moved = float(np.max(np.abs(xy_t - xy)[inside & inside_t], initial=0.0))
                 cam, r, xy, inside, current = trial, r_t, xy_t, inside_t, c_t
                 damping = max(damping / 3.0, 1e-6)
                 break
             damping *= 10.0
         else:
             break
-        if gain < POSE_MIN_GAIN:
+        if gain < POSE_MIN_GAIN or moved < POSE_MIN_MOVE:
             break
     return cam, first, current
 
 
-def _refine(view: View, caster: RayCaster, predictor: Predictor | None, scales: tuple[float, ...],
+def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales: tuple[float, ...],
             steps: int, free: np.ndarray) -> tuple[Camera, dict]:
-    """One view's camera aligned from coarse to fine: the prediction and the silhouette
-    against the image and its alpha (``predictor`` given), or the silhouette alone."""
+    """One view's camera aligned from coarse to fine: the ``predicted`` image (H, W, 3) of
+    the view at its camera and the silhouette against the image and its alpha, or the
+    silhouette alone (``predicted`` None)."""
     cam = view.camera
     info = {"pixels": 0, "cost": [0.0, 0.0]}
     alpha = silhouette(view)
     # the surface points and their predicted radiance, at the starting pose: a pose error of a
     # few pixels barely changes what a point looks like, only where it lands
-    origins, dirs = cam.pixel_rays()
-    face, t = caster.first_hits(origins, dirs)
-    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predictor is None and alpha is None):
+    face, surface = caster.pixel_hits(cam)
+    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predicted is None and alpha is None):
         return cam, info
     coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
-    if predictor is None:
+    if predicted is None:
         predicted, seen = coverage, alpha[..., None]
     else:
-        predicted = predictor.predict(cam)[0]
         seen = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
         if alpha is not None:   # the silhouette as one more channel, at the colours' level
             level = float(np.median(np.linalg.norm(predicted.reshape(-1, 3)[face >= 0], axis=1)))
             predicted = np.concatenate([predicted, level * coverage], axis=2)
             seen = np.concatenate([seen, level * alpha[..., None]], axis=2)
     rows, cols = np.divmod(np.arange(len(face)), cam.width)
+    # a regular grid of pixels: a blurred level needs fewer samples, and none needs more than
+    # POSE_MAX_POINTS
+    thinned = int(np.ceil(np.sqrt(np.count_nonzero(face >= 0) / POSE_MAX_POINTS)))
     for k, sigma in enumerate(scales):
-        stride = max(1, int(sigma // 2))   # a blurred level needs fewer samples
+        stride = max(1, int(sigma // 2), thinned)
         covered = np.nonzero((face >= 0) & (rows % stride == 0) & (cols % stride == 0))[0]
         if len(covered) < POSE_LEVEL_POINTS:
             continue
-        points = origins[covered] + t[covered, None] * dirs[covered]
-        template = _blur(predicted, sigma).reshape(-1, predicted.shape[2])[covered]
+        blurred, factor = _blur(predicted, sigma)
+        template = _sample(blurred, (np.stack([cols[covered], rows[covered]], axis=1) + 0.5) / factor)
         finest = k == len(scales) - 1   # the result must fit at least as well as the given pose
-        cam, before, after = _align(_blur(seen, sigma), template, points, cam, steps, free,
+        cam, before, after = _align(*_blur(seen, sigma), template, surface[covered], cam, steps, free,
                                     view.camera if finest else None)
         info["pixels"], info["cost"] = int(len(covered)), [before, after]
     return cam, info
@@ -252,7 +281,7 @@ def refine_view(view: View, predictor: Predictor, scales: tuple[float, ...] = PO
     camera : the refined Camera (the input one when too few pixels are covered).
     info : dict with 'pixels' used and 'cost' (robust cost before and after, finest level).
     """
-    return _refine(view, predictor.caster, predictor, scales, steps, np.ones(6, dtype=bool))
+    return _refine(view, predictor.caster, predictor.predict(view.camera)[0], scales, steps, np.ones(6, dtype=bool))
 
 
 def centre_view(view: View, caster: RayCaster, scales: tuple[float, ...] = SILHOUETTE_SCALES,
@@ -308,24 +337,60 @@ def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
             and change["translation"] <= POSE_MAX_SHIFT * np.linalg.norm(before.center - centre))
 
 
+def held_out_predictions(views: list[View], predictor: Predictor, folds: int) -> list[np.ndarray]:
+    """Each view's predicted image with no face's albedo taken from the view's own pixels.
+
+    The views fall in ``folds`` interleaved groups (view i in group i % folds). A view's
+    prediction under ``predictor`` is scaled, per face and channel, by the least-squares gain
+    that maps the predictions of the other groups' views onto their images (pixels weighted
+    by alpha): an estimate of each face's albedo from the other groups, under the estimate's
+    light. On a specular surface a face's albedo comes from the few views that hold its
+    highlight, so a view aligned with an estimate of its own pixels mostly meets itself,
+    wherever it is; the light, a few hundred coefficients fitted to every view, barely
+    depends on any one of them.
+
+    Returns
+    -------
+    list of (H, W, 3) float32 images, 0 on the background and on faces the other groups do not see.
+    """
+    faces = predictor.mesh.num_faces
+    fits = np.zeros((2, folds, faces, 3))   # per group: sums of (image x prediction, prediction^2)
+    seen = []
+    for i, view in enumerate(views):
+        predicted = predictor.predict(view.camera)[0]
+        face = predictor.caster.face_id_buffer(view.camera).ravel()
+        hit = np.nonzero(face >= 0)[0]
+        p = predicted.reshape(-1, 3)[hit].astype(np.float64)
+        o = view.rgb.reshape(-1, 3)[hit]
+        w = 1.0 if view.alpha is None else np.clip(view.alpha.reshape(-1)[hit, None], 0.0, 1.0)
+        for k, value in enumerate((w * o * p, w * p * p)):
+            fits[k, i % folds] += np.stack([np.bincount(face[hit], value[:, c], faces) for c in range(3)], axis=1)
+        seen.append((predicted, face))
+    others = fits.sum(axis=1, keepdims=True) - fits               # (2, folds, F, 3): the other groups' sums
+    gains = np.divide(others[0], others[1], out=np.zeros_like(others[0]), where=others[1] > 0)
+    return [(predicted.reshape(-1, 3) * np.where(face[:, None] >= 0, gains[i % folds][face], 0.0)
+             ).reshape(predicted.shape).astype(np.float32) for i, (predicted, face) in enumerate(seen)]
+
+
 def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate], rounds: int = POSE_ROUNDS,
                  folds: int = PoseConfig.pose_folds, caster: RayCaster | None = None, log=None
                  ) -> tuple[MultiViewData, list[dict]]:
     """Every training view's camera refined, the mesh and images kept.
 
-    First each camera is moved so the silhouette matches the view's alpha. Then, ``rounds``
-    times, the views are split into ``folds`` interleaved groups; each group is aligned with
-    the image predicted by ``solve`` on the other groups, so a view is never pulled toward an
-    estimate that already holds its own misregistered pixels.
+    First each camera is moved so the silhouette matches the view's alpha. Then ``solve``
+    estimates once from all views, and ``rounds`` times every view is aligned with its
+    :func:`held_out_predictions`: the estimate's image of it, with each face's albedo from
+    the views of the other ``folds`` - 1 groups at their current poses, so a view is never
+    pulled toward its own misregistered pixels. The estimate's light and reflection rows
+    serve every round; only the faces' albedos follow the views as they move.
 
     Parameters
     ----------
     solve : MultiViewData -> Estimate (the method that will run on the refined data).
     caster : ray queries of ``data.mesh`` (None: built with the default variant).
     rounds : alignment rounds (at least 1).
-    folds : view groups per round (2 to the number of views). When an estimate from the
-        other groups would hold fewer than :data:`POSE_MIN_VIEWS` views, only the
-        silhouette step runs.
+    folds : view groups (2 to the number of views). When the other groups would hold fewer
+        than :data:`POSE_MIN_VIEWS` views, only the silhouette step runs.
 
     A view whose correction grows beyond :func:`plausible` goes back to its silhouette-only
     pose, or to its given pose when that too is beyond it (and is marked 'diverged'): it was
@@ -361,15 +426,13 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
         if log:
             log(f"pose refinement: {n} views in {folds} groups leave under {POSE_MIN_VIEWS} views per held-out "
                 "estimate; only the silhouette step ran")
+    predictor = Predictor(data.mesh, solve(dataclasses.replace(data, views=views)), caster) if rounds else None
+    everything = np.ones(6, dtype=bool)
     for r in range(rounds):
-        for k in range(folds):
-            held = [i for i in range(n) if i % folds == k]
-            predictor = Predictor(data.mesh, solve(dataclasses.replace(data, views=[
-                v for i, v in enumerate(views) if i % folds != k])), caster)
-            for i in held:
-                cam, last[i] = refine_view(views[i], predictor)
-                diverged[i] = not plausible(data.views[i].camera, cam, centre)
-                views[i] = centred[i] if diverged[i] else dataclasses.replace(views[i], camera=cam)
+        for i, predicted in enumerate(held_out_predictions(views, predictor, folds)):
+            cam, last[i] = _refine(views[i], caster, predicted, POSE_SCALES, POSE_STEPS, everything)
+            diverged[i] = not plausible(data.views[i].camera, cam, centre)
+            views[i] = centred[i] if diverged[i] else dataclasses.replace(views[i], camera=cam)
         if log:
             moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
             log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg")

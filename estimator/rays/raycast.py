@@ -96,14 +96,21 @@ class RayCaster:
         prim = np.asarray(pi.prim_index, dtype=np.int64)
         return np.where(hit, prim, MISS)
 
-    def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(face (N,) int64 with -1 on a miss, distance t (N,) float64, inf on a miss)."""
-        if len(origins) == 0:
-            return np.zeros(0, dtype=np.int64), np.zeros(0)
-        pi = self.scene.ray_intersect_preliminary(self._rays(origins, directions))
-        hit = np.asarray(pi.is_valid(), dtype=bool)
-        return (np.where(hit, np.asarray(pi.prim_index, dtype=np.int64), -1),
-                np.where(hit, np.asarray(pi.t, dtype=np.float64), np.inf))
+    def pixel_hits(self, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+        """Where each pixel centre's ray first meets the mesh: (face (H*W,) int64, -1 on a
+        miss; point (H*W, 3) float64, NaN on a miss), from the camera's face-ID buffer (traced
+        once and kept, :meth:`face_id_buffers`) and the hit face's plane."""
+        face = self.face_id_buffer(camera).ravel().astype(np.int64)
+        origins, dirs = camera.pixel_rays()
+        hit = np.nonzero(face >= 0)[0]
+        normal = self.mesh.face_normals[face[hit]]
+        corner = self.mesh.vertices[self.mesh.faces[face[hit], 0]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.sum(normal * (corner - origins[hit]), axis=1) / np.sum(normal * dirs[hit], axis=1)
+        points = np.full((len(face), 3), np.nan)
+        points[hit] = origins[hit] + t[:, None] * dirs[hit]
+        face[hit[~np.isfinite(t)]] = MISS   # a ray along its face's plane (grazing)
+        return face, points
 
     def face_id_buffer(self, camera: Camera) -> np.ndarray:
         """(H, W) int32 face seen through each pixel centre, -1 for background (read-only)."""
@@ -118,7 +125,7 @@ class RayCaster:
         one face alone, so their colour is that face's even in antialiased images.
         Buffers are kept per camera (pose, intrinsics, size) up to
         :data:`BUFFER_CACHE_BYTES`, the least recently used dropped first: the pose check,
-        the pose refinement's held-out estimates and the observations trace the same views
+        the pose refinement and the observations trace the same views
         again and again, and only a moved camera is traced anew.
 
         Returns
