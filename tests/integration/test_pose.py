@@ -11,7 +11,6 @@ from estimator.model.forward import Predictor
 from estimator.pipeline.pose import (
     _blur,
     _sample,
-    held_out_predictions,
     plausible,
     projection_jacobian,
     refine_poses,
@@ -91,22 +90,19 @@ def test_a_coarse_level_is_the_full_resolution_blur(sigma):
     assert error[inner].max() <= (1e-6 if factor == 1 else 0.04) * reference.max()
 
 
-def test_a_held_out_prediction_ignores_its_own_view(tiny_earth_data):
+def test_poses_without_alpha_are_refined_by_held_out_estimates(tiny_earth_data):
+    # no alpha: no silhouette step, the texture and highlights alone place each view; an
+    # estimate holding the view's own pixels (its light's lobes included) would keep it
     data = tiny_earth_data.data
-    predictor = Predictor(data.mesh, estimate(data, "bilinear-per-face", EARTH))
-    before = held_out_predictions(data.views, predictor, 4)
-    # view 1 (group 1) turns twice as bright: its own prediction keeps, the other groups' follow
-    views = list(data.views)
-    views[1] = dataclasses.replace(views[1], rgb=2.0 * views[1].rgb)
-    after = held_out_predictions(views, predictor, 4)
-    np.testing.assert_allclose(after[1], before[1], rtol=1e-5, atol=1e-7)
-    np.testing.assert_allclose(after[5], before[5], rtol=1e-5, atol=1e-7)   # group 1 too
-    changed = [k for k in range(len(views)) if k % 4 != 1 and not np.allclose(after[k], before[k], rtol=1e-3)]
-    assert len(changed) >= 0.5 * sum(k % 4 != 1 for k in range(len(views)))
-    # on the estimate's own images the other groups agree with it: each face's gain is 1
-    own = [dataclasses.replace(v, rgb=predictor.predict(v.camera)[0], alpha=None) for v in data.views]
-    for image, view in zip(held_out_predictions(own, predictor, 4), own):
-        np.testing.assert_allclose(image, view.rgb, rtol=1e-4, atol=1e-6)
+    bad = dataclasses.replace(data, views=[dataclasses.replace(v, alpha=None)
+                                           for v in jittered(data.views, 1.0, 0.02, seed=1)])
+    refined, info = refine_poses(bad, lambda d: estimate(d, "bilinear-per-face", EARTH), rounds=2, folds=4)
+    truth = [v.camera for v in data.views]
+    before = reprojection_error([v.camera for v in bad.views], truth, data.mesh.vertices)
+    after = reprojection_error([v.camera for v in refined.views], truth, data.mesh.vertices)
+    # measured at 96x96: median 1.92 -> 0.90 px (one estimate for all views, its faces'
+    # albedos refitted per group: 1.68 px)
+    assert np.median(after) < 0.6 * np.median(before) and not any(p["diverged"] for p in info)
 
 
 def test_pixel_hits_lie_on_the_pixel_rays_and_the_hit_faces(tiny_earth_data):
