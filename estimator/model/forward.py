@@ -8,7 +8,7 @@ from ..core.camera import Camera
 from ..core.data import TriangleMesh
 from ..core.errors import InputError
 from ..rays.raycast import RayCaster
-from ..rays.visibility import compute_visibility, sphere_sampling
+from ..rays.visibility import shadow_function, sphere_sampling
 from .estimate import Estimate
 from .reflection import mirror_directions
 
@@ -36,7 +36,7 @@ class Predictor:
         self.mesh, self.estimate, self.model = mesh, estimate, estimate.model
         self.caster = caster or RayCaster(mesh, estimate.config.variant)
         self.sampling = sphere_sampling(estimate.config.directions)
-        self.visibility = compute_visibility(self.caster, self.sampling)
+        self.visibility = shadow_function(self.caster, self.sampling)
         self.c_matrix = self.model.diffuse_matrix(mesh, self.sampling, self.visibility)
 
     def light(self, rotation: np.ndarray | None = None) -> np.ndarray:

@@ -15,7 +15,7 @@ from ..model.reflection import mirror_directions
 from ..model.reflection_models import ReflectionConfig, ReflectionModel, reflection_model
 from ..rays.backend import BackendConfig
 from ..rays.raycast import ClusterCaster, RayCaster
-from ..rays.visibility import SphereSampling, Visibility, VisibilityConfig, compute_visibility, sphere_sampling
+from ..rays.visibility import SphereSampling, Visibility, VisibilityConfig, shadow_function, sphere_sampling
 from .observations import ObservationConfig, Observations, gather_observations
 
 ROW_CHUNK = 65_536   # rows of a reflection matrix computed at once when they are streamed (~63 MB)
@@ -274,7 +274,7 @@ def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | 
 
     t = time.perf_counter()
     sampling = sphere_sampling(config.directions)
-    visibility = compute_visibility(caster, sampling)
+    visibility = shadow_function(caster, sampling)
     timings["visibility"] = time.perf_counter() - t
     say(f"visibility: {data.mesh.num_faces} faces x {config.directions} directions")
 

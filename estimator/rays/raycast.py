@@ -68,6 +68,9 @@ class RayCaster:
         self.scale = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
         # face-ID buffers by (kind, camera), least recently used first, at most BUFFER_CACHE_BYTES
         self._buffers: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        # shadow functions by sampling directions (visibility.shadow_function): the mesh's, so
+        # every estimate and prediction a run makes with this caster shares them
+        self.shadow_functions: dict[bytes, object] = {}
 
     def _rays(self, origins: np.ndarray, directions: np.ndarray, tmax: float | None = None):
         mi = self.mi

@@ -83,6 +83,19 @@ class Visibility:
         return ((byte >> (7 - (directions & 7))) & 1).astype(bool)
 
 
+def shadow_function(caster: RayCaster, sampling: SphereSampling) -> Visibility:
+    """:func:`compute_visibility` of ``caster``'s mesh, computed once per caster and sampling
+    and kept on the caster (read-only): it depends on the mesh alone, and a run asks for it
+    again for each held-out estimate and prediction (pose refinement, cross-validation)."""
+    key = np.ascontiguousarray(sampling.directions).tobytes()
+    held = caster.shadow_functions.get(key)
+    if held is None:
+        held = compute_visibility(caster, sampling)
+        held.bits.flags.writeable = False
+        caster.shadow_functions[key] = held
+    return held
+
+
 def compute_visibility(caster: RayCaster, sampling: SphereSampling, max_rays: int = 8_000_000,
                        offset: float = 1e-4, progress=None) -> Visibility:
     """Shadow rays from every face centroid to every direction of its upper hemisphere.

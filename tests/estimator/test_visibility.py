@@ -5,7 +5,7 @@ from estimator.core import sh
 from estimator.core.data import TriangleMesh
 from estimator.model.reflection import diffuse_matrix, lobe_matrix, mirror_matrix
 from estimator.rays.raycast import RayCaster
-from estimator.rays.visibility import compute_visibility, sphere_sampling
+from estimator.rays.visibility import compute_visibility, shadow_function, sphere_sampling
 
 from .meshes import lobed, sphere
 
@@ -42,6 +42,18 @@ def test_chunking_does_not_change_the_result_and_concave_faces_are_shadowed():
     upper = mesh.face_normals @ s.directions.T > 0
     shadowed = (upper & ~a.unpack(slice(None))).sum(axis=1)
     assert shadowed.max() > 5 and (shadowed > 0).mean() > 0.1  # valleys shadow themselves
+
+
+def test_the_shadow_function_is_computed_once_per_caster_and_sampling():
+    mesh = lobed(3, lobes=4)
+    caster = RayCaster(mesh)
+    first = shadow_function(caster, sphere_sampling(200))
+    assert shadow_function(caster, sphere_sampling(200)) is first                # kept on the caster
+    np.testing.assert_array_equal(first.bits, compute_visibility(caster, sphere_sampling(200)).bits)
+    assert not first.bits.flags.writeable                                        # shared: read-only
+    other = shadow_function(caster, sphere_sampling(300))
+    assert other is not first and other.num_directions == 300
+    assert shadow_function(RayCaster(mesh), sphere_sampling(200)) is not first  # another caster, its own
 
 
 def test_unshadowed_diffuse_matrix_is_the_clamped_cosine():
