@@ -106,7 +106,7 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
         shade = shade + indirect.indirect_shading(prep.caster, prep.sampling, prep.visibility,
                                                   np.where(usable[:, None], radiance, 0.0))
     albedo, lit = divide_shade(shade, radiance, usable)
-    labels, regions, edges = np.full(f, -1, dtype=np.int64), 0, mesh.face_adjacency
+    labels, regions, edges = np.full(f, -1, dtype=np.int64), 0, prep.edges
     if h.regions:
         features = in_unit_dc(albedo, h.light)
         labels, _ = segment(np.where(lit[:, None], features, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
