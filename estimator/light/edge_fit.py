@@ -193,6 +193,7 @@ class EdgeGraph:
         keys, self._slot = np.unique(rows * faces + cols, return_inverse=True)
         self._pattern = sparse.csr_matrix((np.ones(len(keys)), (keys // faces, keys % faces)), shape=(faces, faces))
         self._pattern.sort_indices()
+        self._pattern_rows = np.repeat(np.arange(faces), np.diff(self._pattern.indptr))
 
     def __len__(self) -> int:
         return len(self.i)
@@ -205,10 +206,18 @@ class EdgeGraph:
         """(F,) B^T v for v (E',)."""
         return np.bincount(self.i, v, self.faces) - np.bincount(self.j, v, self.faces)
 
-    def laplacian(self, w: np.ndarray) -> sparse.csr_matrix:
-        """(F, F) B^T diag(w) B for edge weights w (E',)."""
+    def laplacian(self, w: np.ndarray, scale: np.ndarray | None = None,
+                  diagonal: np.ndarray | None = None) -> sparse.csr_matrix:
+        """(F, F) B^T diag(w) B for edge weights w (E',), plus diag(``diagonal``) (F,) when
+        given; with ``scale`` (F,), that matrix as D (.) D for D = diag(scale) (the edge fit's
+        rows each divided by their face's shading, applied to the O(nnz) entries rather than to
+        an (F, k) matrix per step)."""
         degree = np.bincount(self.i, w, self.faces) + np.bincount(self.j, w, self.faces)
+        if diagonal is not None:
+            degree = degree + diagonal
         data = np.bincount(self._slot, np.concatenate([degree, -w, -w]), self._pattern.nnz)
+        if scale is not None:
+            data *= scale[self._pattern_rows] * scale[self._pattern.indices]
         return sparse.csr_matrix((data, self._pattern.indices, self._pattern.indptr), shape=self._pattern.shape)
 
 
@@ -230,13 +239,15 @@ def _fit_channel(ell, c_matrix, graph, member, group, regions, light, usable, lo
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
+    columns = np.ascontiguousarray(c_matrix[:, first:])   # the unknowns' columns, once per fit
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, graph, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
-        # the log shading's gradient; 0 on faces outside the fit (their shading may be 0: a
-        # face that sees no sky), which no edge or region row reads
-        gradient_rows = np.where(usable[:, None], c_matrix[:, first:] / np.where(usable, shade, 1.0)[:, None], 0.0)
-        normal, gradient = _normal_equations(gradient_rows, graph, member, group, regions, weights, residual)
+        # the log shading's gradient is columns / shade per face; 0 on faces outside the fit
+        # (their shading may be 0: a face that sees no sky), which no edge or region row reads
+        inverse_shade = np.where(usable, 1.0 / np.where(usable, shade, 1.0), 0.0)
+        normal, gradient = _normal_equations(columns, inverse_shade, graph, member, group, regions, weights,
+                                             residual)
         # the ridge on the light relative to its DC: with an ``extra`` shading the scale is
         # free, and a ridge on the coefficients themselves would shrink the whole light until
         # the (faint) extra term is as bright as the direct, bending its shape
@@ -271,29 +282,33 @@ def _residuals(ell, log_shade, graph, member, group, alpha) -> np.ndarray:
     return np.concatenate([edge, region])
 
 
-def _normal_equations(g, graph, member, group, regions, weights, residual):
+def _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual):
     """Gauss-Newton normal equations (J^T W J, J^T W r) of :func:`_residuals` with respect to
     the light coefficients and the regions' log albedos, without forming J.
 
-    ``g`` (F, k) is the log shading's gradient per face (diffuse rows over the shading). An
-    edge's row is -(g_i - g_j) = -(B g)_e with B the (E', F) signed incidence of ``graph``
-    (:class:`EdgeGraph`), so the edges give g^T B^T W B g (a weighted graph Laplacian) and
-    -g^T B^T W r; a region row of face f in group r is [-g_f, -e_r]. Memory and time grow with
-    faces x k^2, not edges x k^2.
+    The log shading's gradient per face is g = D c, ``columns`` c (F, k) the diffuse rows of
+    the unknowns and D = diag(``inverse_shade``) (F,) (0 outside the fit). An edge's row is
+    -(g_i - g_j) = -(B g)_e with B the (E', F) signed incidence of ``graph``
+    (:class:`EdgeGraph`); a region row of face f in group r is [-g_f, -e_r]. The light's block
+    is therefore c^T D (B^T W_e B + W_r) D c, W_r the region rows' weights on the diagonal: one
+    sparse product and one (k, F) x (F, k) product per step, the scaling applied to the sparse
+    matrix's entries. Memory and time grow with faces x k^2, not edges x k^2.
     """
-    k = g.shape[1]
+    k = columns.shape[1]
+    faces = len(inverse_shade)
     ne = len(graph)
     w_edge, w_region = weights[:ne], weights[ne:]
     r_edge, r_region = residual[:ne], residual[ne:]
     normal = np.zeros((k + regions, k + regions))
     gradient = np.zeros(k + regions)
-    normal[:k, :k] = g.T @ (graph.laplacian(w_edge) @ g)
-    gradient[:k] = -(g.T @ graph.gather(w_edge * r_edge))
+    on_diagonal = np.bincount(member, w_region, faces) if len(member) else None   # a face is in one region row
+    normal[:k, :k] = columns.T @ (graph.laplacian(w_edge, inverse_shade, on_diagonal) @ columns)
+    pulled = graph.gather(w_edge * r_edge)
     if len(member):
-        gm = g[member]
-        normal[:k, :k] += (gm * w_region[:, None]).T @ gm
-        gradient[:k] -= gm.T @ (w_region * r_region)
-        cross = sparse.csr_matrix((w_region, (group, np.arange(len(member)))), shape=(regions, len(member))) @ gm
+        pulled = pulled + np.bincount(member, w_region * r_region, faces)
+    gradient[:k] = -(columns.T @ (inverse_shade * pulled))
+    if len(member):
+        cross = sparse.csr_matrix((w_region * inverse_shade[member], (group, member)), shape=(regions, faces)) @ columns
         normal[:k, k:] = cross.T
         normal[k:, :k] = cross
         normal[k:, k:] = np.diag(np.bincount(group, w_region, minlength=regions))
