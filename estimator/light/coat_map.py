@@ -196,7 +196,7 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
     if rows == 0:
         raise InputError("no observation sees the light reflected by the coat (every mirror direction is blocked)")
     transmit = 1.0 - fresnel
-    a = sparse.diags(fresnel) @ bilinear_rows(mirror, height, width)          # (N, H*W)
+    a = (sparse.diags(fresnel) @ bilinear_rows(mirror, height, width)).tocsr()   # (N, H*W)
     b = sparse.csr_matrix((transmit, (np.arange(rows), face)), shape=(rows, n_faces))
     smooth = map_differences(height, width)
     cells = height * width
@@ -207,17 +207,17 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
     for c in range(3):
         weights = np.ones(rows)
         for _ in range(max(rounds, 1)):
-            a_c, y_c, denominator = _project_off_faces(a, rgb[:, c], b, weights)
-            system = (a_c.T @ sparse.diags(weights) @ a_c).toarray()
+            system, right, faces_fit = _face_eliminated_system(a, b, rgb[:, c], weights)
             system += max(np.trace(system) / cells, 1e-300) * ridge
             # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
             light[:, c] = linalg.cho_solve(linalg.cho_factor(system, overwrite_a=True, check_finite=False),
-                                           a_c.T @ (weights * y_c), check_finite=False)
-            residual = y_c - a_c @ light[:, c]
+                                           right, check_finite=False)
+            residual = faces_fit(light[:, c])
             weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual), floor=1e-12))
-        total = np.sum(weights * y_c ** 2)
+        projected = faces_fit(np.zeros(cells))      # the values with each face's diffuse projected off
+        total = np.sum(weights * projected ** 2)
         explained[c] = 1.0 - np.sum(weights * residual ** 2) / total if total > 0 else 0.0
-        denominator = np.asarray(b.multiply(sparse.diags(weights) @ b).sum(axis=0)).ravel()
+        denominator = np.bincount(face, weights * transmit ** 2, minlength=n_faces)
         seen = denominator > 0
         diffuse[seen, c] = (b.T @ (weights * (rgb[:, c] - a @ light[:, c])))[seen] / denominator[seen]
     spare = rows - len(np.unique(face))
@@ -267,11 +267,29 @@ def _reflecting_rows(face, view_dir, normals, sampling, visibility, ior):
     return keep, mirror[keep], fresnel_dielectric(cos[keep], ior)
 
 
-def _project_off_faces(a, y, b, weights):
-    """Rows ``a`` (N, K) and values ``y`` (N,) with each face's transmission column of ``b``
-    (N, F) projected off in the ``weights`` (N,) inner product (the per-face diffuse
-    eliminated), and (F,) that column's weighted squared norm per face."""
-    wb = sparse.diags(weights) @ b
-    denominator = np.asarray(b.multiply(wb).sum(axis=0)).ravel()
-    inverse = sparse.diags(np.where(denominator > 0, 1.0 / np.maximum(denominator, 1e-300), 0.0))
-    return a - b @ (inverse @ (wb.T @ a)), y - b @ (inverse @ (wb.T @ y)), denominator
+def _face_eliminated_system(a, b, y, weights):
+    """The map's weighted normal equations with every face's diffuse eliminated.
+
+    ``a`` (N, K) are the rows of the map's vertices, ``b`` (N, F) each row's transmission in
+    its face's column (one nonzero per row), ``y`` (N,) the values and ``weights`` (N,). With
+    D = b^T W b diagonal (the faces' columns are disjoint) and P = b^T W a, the Schur
+    complement a^T W a - P^T D^-1 P and a^T W y - P^T D^-1 b^T W y are the normal equations of
+    the rows with each face's column projected off, formed without that projection's fill-in
+    (a projected row holds every vertex its face's rows touch).
+
+    Returns the (K, K) dense system, the (K,) right side and a function of the map (K,) that
+    gives the (N,) residuals with each face's diffuse refitted under it (at the map 0: the
+    values projected off the faces' columns).
+    """
+    weighted_a = sparse.diags(weights) @ a
+    denominator = np.asarray((b.multiply(b).T @ weights)).ravel()                   # (F,) D
+    inverse = np.where(denominator > 0, 1.0 / np.maximum(denominator, 1e-300), 0.0)
+    p = (b.T @ weighted_a).tocsr()                                                  # (F, K) P
+    system = (a.T @ weighted_a).toarray() - (p.T @ sparse.diags(inverse) @ p).toarray()
+    right = a.T @ (weights * y) - p.T @ (inverse * (b.T @ (weights * y)))
+
+    def faces_fit(light: np.ndarray) -> np.ndarray:
+        rest = y - a @ light
+        return rest - b @ (inverse * (b.T @ (weights * rest)))
+
+    return system, right, faces_fit
