@@ -8,7 +8,7 @@ from estimator.core import sh
 from estimator.core.data import TriangleMesh
 from estimator.core.errors import InputError
 from estimator.light.edge_fit import log_shading_fit
-from estimator.light.sun import brightest_direction, find_sun, sun_shading
+from estimator.light.sun import brightest_direction, find_sun, sun_shading, sun_shadings
 from estimator.model.reflection import diffuse_matrix, fresnel_dielectric
 from estimator.model.reflection_models import reflection_model
 from estimator.rays.raycast import ELSEWHERE, MISS, ClusterCaster, RayCaster
@@ -28,6 +28,25 @@ def test_convex_object_shading_is_the_cosine_over_pi():
     np.testing.assert_allclose(np.pi * sun_shading(mesh, RayCaster(mesh), d), np.maximum(mesh.face_normals @ d, 0),
                                atol=1e-12)
 
+
+
+def test_directions_batched_in_one_ray_query_give_each_direction_s_column():
+    """sun_shadings of six directions (one ray query, shadows and a coat included) equals
+    sun_shading of each alone, (F, 6): the same faces lit (the same shadow rays), the values to
+    1e-12 (the cosines' products differ in rounding with the batch's shape)."""
+    a, b = sphere(2), sphere(2)
+    mesh = TriangleMesh(np.vstack([a.vertices, b.vertices + [0.0, 2.5, 0.0]]),
+                        np.vstack([a.faces, b.faces + len(a.vertices)]))
+    caster = RayCaster(mesh)
+    ring = np.array([_unit(v) for v in ([0, 1, 0], [0.3, 0.9, 0], [1, 0.1, 0], [0, 0.2, -1], [-1, -1, 0.5],
+                                        [0, -1, 0])])
+    for ior in (None, 1.5):
+        both = sun_shadings(mesh, caster, ring, ior)
+        assert both.shape == (mesh.num_faces, 6) and np.any(both == 0) and np.any(both > 0)
+        for k, d in enumerate(ring):
+            alone = sun_shading(mesh, caster, d, ior)
+            np.testing.assert_array_equal(both[:, k] > 0, alone > 0)
+            np.testing.assert_allclose(both[:, k], alone, rtol=1e-12, atol=0)
 
 def test_a_blocker_casts_a_full_shadow():
     """A sphere above another: faces of the lower sphere under the upper one are dark for a
