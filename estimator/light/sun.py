@@ -28,7 +28,7 @@ from ..core import sh
 from ..core.data import TriangleMesh
 from ..core.settings import Section
 from ..model.reflection import fresnel_dielectric
-from ..rays.raycast import MISS, RayCaster
+from ..rays.raycast import RayCaster
 from . import edge_fit
 
 SAMPLE_POINTS = 6       # shadow rays per face for its lit share
@@ -109,7 +109,7 @@ def sun_shadings(mesh: TriangleMesh, caster: RayCaster, directions: np.ndarray, 
     origins = (starts + offset * caster.scale * normals[face, None, :]).reshape(-1, 3)
     rays = np.repeat(d[which], points, axis=0)
     lit = np.zeros(cosine.shape)
-    lit[face, which] = (caster.first_hit_faces(origins, rays) == MISS).reshape(-1, points).mean(axis=1)
+    lit[face, which] = caster.escapes(origins, rays).reshape(-1, points).mean(axis=1)
     through = 1.0 if coat_ior is None else 1.0 - fresnel_dielectric(cosine, coat_ior)
     return cosine * through * lit / np.pi
 

@@ -81,6 +81,9 @@ def test_faces_outside_the_clusters_still_cast_their_shadow():
     hit = clusters.first_hit_faces(origins, np.array([[0.0, 1.0, 0.0]] * 3))
     assert 0 <= hit[0] < a.num_faces and a.face_normals[hit[0], 1] < -0.9      # the lower sphere's bottom
     assert hit[1] == ELSEWHERE and hit[2] == MISS
+    # a shadow ray escapes only where it hits nothing, a face in no cluster included
+    np.testing.assert_array_equal(clusters.escapes(origins, np.array([[0.0, 1.0, 0.0]] * 3)), [False, False, True])
+    assert clusters.escapes(np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
     # two faces in one cluster: a ray hitting either reports it
     pair = np.where(np.arange(mesh.num_faces) == hit[0], 7, cluster)
     assert ClusterCaster(whole, pair, a).first_hit_faces(origins[:1], np.array([[0.0, 1.0, 0.0]]))[0] == 7
