@@ -8,8 +8,8 @@ with D_f its diffuse radiance (unknown, one per face: the texture), F the Fresne
 reflectance of the coat (index ``ior``), r the mirror direction of v about the normal and
 L the distant light. Mitsuba's ``plastic`` transmits the diffuse radiance through the
 coat with 1 - F(n . v) (``roughplastic`` nearly so), so both terms change with the view.
-Both are linear: the per-face D_f are eliminated (each face's rows are projected off its
-transmission column), and L, a map of ``height`` x ``width`` vertices sampled bilinearly
+Both are linear: the per-face D_f are eliminated (each face's rows projected off its
+transmission column, formed as the Schur complement of the faces' diagonal block), and L, a map of ``height`` x ``width`` vertices sampled bilinearly
 (:mod:`estimator.core.latlong`), solves a weighted least-squares problem with a smoothness
 penalty on neighbouring vertices, reweighted by a robust loss (glints of a sun narrower
 than a cell, pixels mixing a face's texture differently from view to view). Rows whose
