@@ -31,8 +31,9 @@ def diffuse_matrix(mesh: TriangleMesh, sampling: SphereSampling, visibility: Vis
     for start in range(0, len(faces), chunk):
         part = faces[start:start + chunk]
         cos = np.maximum(normals[part] @ sampling.directions.T, 0.0)
-        if coat_ior is not None:
-            cos = cos * (1.0 - fresnel_dielectric(cos, coat_ior))
+        if coat_ior is not None:   # the Fresnel term only where the cosine is positive (about half)
+            facing = cos > 0
+            cos[facing] *= 1.0 - fresnel_dielectric(cos[facing], coat_ior)
         out[start:start + len(part)] = (cos * visibility.unpack(part)) @ y_weighted
     return out
 
