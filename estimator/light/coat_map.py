@@ -9,8 +9,9 @@ reflectance of the coat (index ``ior``), r the mirror direction of v about the n
 L the distant light. Mitsuba's ``plastic`` transmits the diffuse radiance through the
 coat with 1 - F(n . v) (``roughplastic`` nearly so), so both terms change with the view.
 Both are linear: the per-face D_f are eliminated (each face's rows projected off its
-transmission column, formed as the Schur complement of the faces' diagonal block), and L, a map of ``height`` x ``width`` vertices sampled bilinearly
-(:mod:`estimator.core.latlong`), solves a weighted least-squares problem with a smoothness
+transmission column, formed as the Schur complement of the faces' diagonal block), and L,
+a map of ``height`` x ``width`` vertices sampled bilinearly (:mod:`estimator.core.latlong`),
+solves a weighted least-squares problem with a smoothness
 penalty on neighbouring vertices, reweighted by a robust loss (glints of a sun narrower
 than a cell, pixels mixing a face's texture differently from view to view). Rows whose
 mirror direction the object itself blocks (the shadow function) show the object, not the
@@ -272,7 +273,8 @@ def _face_eliminated_system(a, b, y, weights):
 
     ``a`` (N, K) are the rows of the map's vertices, ``b`` (N, F) each row's transmission in
     its face's column (one nonzero per row), ``y`` (N,) the values and ``weights`` (N,). With
-    D = b^T W b diagonal (the faces' columns are disjoint) and P = b^T W a, the Schur
+    D = b^T W b diagonal (the faces' columns are disjoint; D^-1 taken as 0 for a face without
+    weight) and P = b^T W a, the Schur
     complement a^T W a - P^T D^-1 P and a^T W y - P^T D^-1 b^T W y are the normal equations of
     the rows with each face's column projected off, formed without that projection's fill-in
     (a projected row holds every vertex its face's rows touch).

@@ -208,10 +208,10 @@ class EdgeGraph:
 
     def laplacian(self, w: np.ndarray, scale: np.ndarray | None = None,
                   diagonal: np.ndarray | None = None) -> sparse.csr_matrix:
-        """(F, F) B^T diag(w) B for edge weights w (E',), plus diag(``diagonal``) (F,) when
-        given; with ``scale`` (F,), that matrix as D (.) D for D = diag(scale) (the edge fit's
-        rows each divided by their face's shading, applied to the O(nnz) entries rather than to
-        an (F, k) matrix per step)."""
+        """(F, F) D (B^T diag(w) B + diag(``diagonal``)) D for edge weights w (E',), the
+        ``diagonal`` (F,) (None: 0) and D = diag(``scale``) (F,) (None: the identity). The
+        scaling is applied to the O(nnz) entries (the edge fit's rows each divided by their
+        face's shading) rather than to an (F, k) matrix per step."""
         degree = np.bincount(self.i, w, self.faces) + np.bincount(self.j, w, self.faces)
         if diagonal is not None:
             degree = degree + diagonal
@@ -301,7 +301,7 @@ def _normal_equations(columns, inverse_shade, graph, member, group, regions, wei
     r_edge, r_region = residual[:ne], residual[ne:]
     normal = np.zeros((k + regions, k + regions))
     gradient = np.zeros(k + regions)
-    on_diagonal = np.bincount(member, w_region, faces) if len(member) else None   # a face is in one region row
+    on_diagonal = np.bincount(member, w_region, faces) if len(member) else None   # summed per face
     normal[:k, :k] = columns.T @ (graph.laplacian(w_edge, inverse_shade, on_diagonal) @ columns)
     pulled = graph.gather(w_edge * r_edge)
     if len(member):

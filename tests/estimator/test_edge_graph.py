@@ -74,3 +74,10 @@ def test_normal_equations_are_j_transpose_w_j_of_the_explicit_jacobian():
     jacobian[len(i) + np.arange(len(member)), k + group] = -1.0
     np.testing.assert_allclose(normal, jacobian.T @ (weights[:, None] * jacobian), atol=1e-10)
     np.testing.assert_allclose(gradient, jacobian.T @ (weights * residual), atol=1e-10)
+    # edges alone (no region row): the light's block and gradient only
+    edges_only = np.arange(len(i))
+    normal, gradient = _normal_equations(columns, inverse_shade, graph, np.zeros(0, int), np.zeros(0, int), 0,
+                                         weights[edges_only], residual[edges_only])
+    jacobian = jacobian[:len(i), :k]
+    np.testing.assert_allclose(normal, jacobian.T @ (weights[edges_only, None] * jacobian), atol=1e-10)
+    np.testing.assert_allclose(gradient, jacobian.T @ (weights[edges_only] * residual[edges_only]), atol=1e-10)

@@ -1,12 +1,20 @@
 """The light a dielectric coat reflects, fitted with every face's diffuse free: round trip
 on synthetic rows, robustness to glints, no light where nothing changes with the view,
-the sun cut out of the map, and bad inputs."""
+the sun cut out of the map, bad inputs, and the faces' elimination against the explicit
+projection."""
 import numpy as np
 import pytest
+from scipy import sparse
 
 from estimator.core import latlong, sh
 from estimator.core.errors import InputError
-from estimator.light.coat_map import bilinear_rows, diffuse_radiance, fit_reflected_light, map_differences
+from estimator.light.coat_map import (
+    _face_eliminated_system,
+    bilinear_rows,
+    diffuse_radiance,
+    fit_reflected_light,
+    map_differences,
+)
 from estimator.model.reflection import fresnel_dielectric, mirror_directions
 from estimator.rays.visibility import Visibility, sphere_sampling
 
@@ -155,3 +163,27 @@ def test_bad_inputs_name_the_problem(change, message):
     args.update(change)
     with pytest.raises(InputError, match=message):
         fit_reflected_light(**args)
+
+
+def test_face_eliminated_system_is_the_projected_rows_normal_equations():
+    """The Schur-complement system equals the normal equations of the rows with each face's
+    transmission column projected off (weighted), to 1e-10 relative, a face without weight and
+    an unseen face included; the residual function refits each face's diffuse under a map."""
+    rng = np.random.default_rng(5)
+    rows, faces, cells = 60, 9, 7
+    face = rng.integers(0, faces - 1, rows)                       # face faces-1 is unseen
+    a = sparse.csr_matrix(rng.random((rows, cells)) * (rng.random((rows, cells)) < 0.4))
+    b = sparse.csr_matrix((0.5 + rng.random(rows), (np.arange(rows), face)), shape=(rows, faces))
+    y, weights = rng.normal(size=rows), rng.random(rows)
+    weights[face == 2] = 0.0                                      # face 2 carries no weight
+    system, right, faces_fit = _face_eliminated_system(a, b, y, weights)
+    w, bd = np.diag(weights), b.toarray()
+    column = np.einsum("nf,nf->f", bd, weights[:, None] * bd)
+    inverse = np.diag(np.where(column > 0, 1.0 / np.where(column > 0, column, 1.0), 0.0))
+    project = np.eye(rows) - bd @ inverse @ bd.T @ w
+    a_c, y_c = project @ a.toarray(), project @ y
+    np.testing.assert_allclose(system, a_c.T @ w @ a_c, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(right, a_c.T @ w @ y_c, rtol=1e-10, atol=1e-12)
+    light = rng.normal(size=cells)
+    np.testing.assert_allclose(faces_fit(light), y_c - a_c @ light, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(faces_fit(np.zeros(cells)), y_c, rtol=1e-10, atol=1e-12)

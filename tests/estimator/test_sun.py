@@ -29,7 +29,6 @@ def test_convex_object_shading_is_the_cosine_over_pi():
                                atol=1e-12)
 
 
-
 def test_directions_batched_in_one_ray_query_give_each_direction_s_column():
     """sun_shadings of six directions (one ray query, shadows and a coat included) equals
     sun_shading of each alone, (F, 6): the same faces lit (the same shadow rays), the values to
@@ -42,11 +41,28 @@ def test_directions_batched_in_one_ray_query_give_each_direction_s_column():
                                         [0, -1, 0])])
     for ior in (None, 1.5):
         both = sun_shadings(mesh, caster, ring, ior)
-        assert both.shape == (mesh.num_faces, 6) and np.any(both == 0) and np.any(both > 0)
+        assert both.shape == (mesh.num_faces, 6) and np.any(both > 0)
+        # the lower sphere's top, turned to a sun overhead, lies in the upper sphere's shadow
+        assert np.any((mesh.face_normals @ ring[0] > 0.5) & (both[:, 0] == 0))
         for k, d in enumerate(ring):
             alone = sun_shading(mesh, caster, d, ior)
             np.testing.assert_array_equal(both[:, k] > 0, alone > 0)
             np.testing.assert_allclose(both[:, k], alone, rtol=1e-12, atol=0)
+
+def test_escapes_is_a_miss_of_the_first_hit():
+    """RayCaster.escapes (any hit) agrees with first_hit_faces == MISS on 2,000 random rays
+    from inside and outside two spheres, both outcomes present."""
+    a, b = sphere(2), sphere(2)
+    caster = RayCaster(TriangleMesh(np.vstack([a.vertices, b.vertices + [0.0, 2.5, 0.0]]),
+                                    np.vstack([a.faces, b.faces + len(a.vertices)])))
+    rng = np.random.default_rng(4)
+    origins = rng.uniform(-2.0, 4.0, (2000, 3))
+    directions = rng.normal(size=(2000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    escaped = caster.escapes(origins, directions)
+    np.testing.assert_array_equal(escaped, caster.first_hit_faces(origins, directions) == MISS)
+    assert 0 < escaped.mean() < 1
+
 
 def test_a_blocker_casts_a_full_shadow():
     """A sphere above another: faces of the lower sphere under the upper one are dark for a
