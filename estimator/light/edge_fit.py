@@ -167,9 +167,12 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     albedo = np.zeros((regions, 3))
     graph = EdgeGraph(i, j, len(faces))
     rows = c_matrix if len(faces) == f else c_matrix[faces]
+    # the unknowns' columns (the DC is the gauge without ``indirect``), copied once for the
+    # three channels' Gauss-Newton products
+    columns = np.ascontiguousarray(rows[:, (1 if indirect is None else 0):])
     for c in range(3):
-        light[:, c], albedo[:, c] = _fit_channel(log_radiance[faces, c], rows, graph, member, group, regions,
-                                                 light[:, c], usable[faces], loss, penalty, iterations,
+        light[:, c], albedo[:, c] = _fit_channel(log_radiance[faces, c], rows, columns, graph, member, group,
+                                                 regions, light[:, c], usable[faces], loss, penalty, iterations,
                                                  None if indirect is None else indirect[faces, c])
     missing = np.bincount(group, minlength=regions) == 0
     if missing.any():   # regions whose faces were not drawn: the median under the fitted light
@@ -221,11 +224,11 @@ class EdgeGraph:
         return sparse.csr_matrix((data, self._pattern.indices, self._pattern.indptr), shape=self._pattern.shape)
 
 
-def _fit_channel(ell, c_matrix, graph, member, group, regions, light, usable, loss, penalty, iterations,
+def _fit_channel(ell, c_matrix, columns, graph, member, group, regions, light, usable, loss, penalty, iterations,
                  extra=None):
     """One channel's Gauss-Newton fit. Unknowns: the light's coefficients from ``first`` on
     (1: the DC is the gauge; 0 with an additive ``extra`` shading, which fixes the scale)
-    and the regions' log albedos."""
+    and the regions' log albedos; ``columns`` is ``c_matrix[:, first:]``, contiguous."""
     first = 1 if extra is None else 0
     extra = np.zeros(len(ell)) if extra is None else extra
     penalty = np.concatenate([[0.0], penalty]) if first == 0 else penalty
@@ -239,7 +242,6 @@ def _fit_channel(ell, c_matrix, graph, member, group, regions, light, usable, lo
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
-    columns = np.ascontiguousarray(c_matrix[:, first:])   # the unknowns' columns, once per fit
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, graph, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
