@@ -1,17 +1,20 @@
-"""The reflection of a smooth dielectric coat, as far as the diffuse solve must remove it.
+"""The reflection of a dielectric coat, as far as the diffuse solve must remove it.
 
 A plastic's clear coat reflects the environment about the mirror direction with the
 Fresnel factor of the view angle. Its sharp glints rarely reach a low quantile of a
-face's colours, but the reflection of the broad, low-order part of the light does: it is
-an additive term that inflates dark albedos and dark channels most, relative to their
-own level. That term varies with the view while the diffuse
-radiance does not, so its weight is fitted to each face's colour changes across views:
+face's colours, but its reflection of the environment's broad part does: it is an additive
+term that inflates dark albedos and dark channels most, relative to their own level. That
+term varies with the view while the diffuse radiance does not, so its weight is fitted to
+each face's colour changes across views:
 
     rgb_fv - mean_v(rgb_fv)  ~  k_c [x_fv - mean_v(x_fv)],   x_fv = F(n . v) L_low(r_fv)
 
-with F the dielectric Fresnel reflectance of ``ior``, r the mirror direction and L_low
-the light truncated to ``order`` (the orders the diffuse shading determines). k >= 0 per
-channel; a bare diffuse surface gives k ~ 0 and is left unchanged.
+with F the dielectric Fresnel reflectance of ``ior``, r the mirror direction and L_low the
+light truncated to an SH degree: degree 0 is the environment's mean level, which only the
+Fresnel factor and the object's own blocking of r (s_f(r): 1 where r escapes the object, 0
+where the object blocks it, :func:`mirror_escapes`) modulate; higher degrees follow the
+light's broad shape.
+k >= 0 per channel; a bare diffuse surface gives k ~ 0 and is left unchanged.
 """
 from __future__ import annotations
 
@@ -22,12 +25,13 @@ import numpy as np
 from ..core import sh
 from ..core.settings import Section
 from ..model.reflection import fresnel_dielectric, mirror_directions
+from ..rays.visibility import SphereSampling, Visibility
 from ..solvers import robust
 
 
 @dataclass
 class CoatConfig(Section):
-    """The reflection of a smooth dielectric coat, removed from the colours (:func:`fit_coat`).
+    """The reflection of a dielectric coat, removed from the colours (:func:`fit_coat`).
 
     Attributes
     ----------
@@ -38,7 +42,8 @@ class CoatConfig(Section):
         differently and the per-region strengths bend the albedo ratios; docs/estimator.md).
     coat_ior : the coat's index of refraction (Fresnel reflectance and transmission).
     coat_order : highest SH degree of the light that the coat's reflection carries (at most
-        ``sh_order``).
+        ``sh_order``). Two reflections are tried, the environment's mean level (degree 0) and the
+        light to this degree, and the decision's criterion keeps one of them or neither.
     coat_min_share : the coat is removed only when its median share of the colours exceeds this.
     coat_max_negative : the fitted weight is scaled down until subtracting it turns at most
         this share more of the observations non-positive (a coat cannot reflect more than a
@@ -61,14 +66,28 @@ class CoatConfig(Section):
         ]
 
 
-def coat_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, order: int, ior: float) -> np.ndarray:
-    """(N, 3) the coat's reflection per unit weight, F(n . v) L_low(r), of observations
+def coat_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, order: int, ior: float,
+              escapes: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3) the coat's reflection per unit weight, F(n . v) L_low(r) s(r), of observations
     with face normals (N, 3) and unit directions to the camera (N, 3), under ``light``
-    (M, 3) SH (truncated to ``order``)."""
+    (M, 3) SH (truncated to ``order``); ``escapes`` (N,) s(r): 1 where the mirror direction
+    escapes the object, 0 where the object blocks it (None: everywhere, :func:`mirror_escapes`)."""
     m = min(sh.num_coeffs(order), light.shape[0])
     mirror = mirror_directions(normals, view_dir)
     low = sh.basis(sh.order_of(m), mirror) @ light[:m]
-    return fresnel_dielectric(np.sum(normals * view_dir, axis=1), ior)[:, None] * low
+    factor = fresnel_dielectric(np.sum(normals * view_dir, axis=1), ior)
+    if escapes is not None:
+        factor = factor * escapes
+    return factor[:, None] * low
+
+
+def mirror_escapes(face: np.ndarray, normals: np.ndarray, view_dir: np.ndarray, sampling: SphereSampling,
+                   visibility: Visibility) -> np.ndarray:
+    """(N,) 1.0 where the mirror direction of observation k (face ``face`` (N,), its normal
+    (N, 3), unit direction to the camera (N, 3)) escapes the object, 0.0 where the object
+    blocks it: the shadow function at the sample direction nearest to it."""
+    mirror = mirror_directions(normals, view_dir)
+    return visibility.lookup(face, sampling.nearest(mirror)).astype(float)
 
 
 def fit_coat(face: np.ndarray, rgb: np.ndarray, rows: np.ndarray, num_faces: int, loss: str = "cauchy",

@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 
 from estimator.core import sh
-from estimator.light.coat import admissible_scale, coat_rows, fit_coat, grey_weights
-from estimator.model.reflection import fresnel_dielectric
+from estimator.light.coat import admissible_scale, coat_rows, fit_coat, grey_weights, mirror_escapes
+from estimator.model.reflection import fresnel_dielectric, mirror_directions
+from estimator.rays.visibility import Visibility, sphere_sampling
 
 
 def test_fresnel_limits():
@@ -26,6 +27,57 @@ def test_rows_follow_the_light_at_the_mirror_direction():
     assert rows.shape == (5, 3)
     # a constant light: the row is the Fresnel factor times the constant radiance Y_00
     np.testing.assert_allclose(rows[:, 0], fresnel_dielectric(v[:, 1], 1.5) * sh.basis(0, v)[:, 0], rtol=1e-10)
+
+
+def _views_of_upward_faces(count, seed):
+    """``count`` observations of faces facing +Y seen from random directions above them."""
+    rng = np.random.default_rng(seed)
+    n = np.tile([[0.0, 1.0, 0.0]], (count, 1))
+    v = rng.normal(size=(count, 3))
+    v[:, 1] = np.abs(v[:, 1]) + 0.5
+    return n, v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_rows_vanish_where_the_object_blocks_the_mirror_direction():
+    n, v = _views_of_upward_faces(6, 4)
+    light = np.zeros((sh.num_coeffs(0), 3))
+    light[0] = [1.0, 2.0, 3.0]
+    escapes = np.array([1.0, 0.0, 1.0, 0.0, 1.0, 1.0])
+    rows = coat_rows(n, v, light, 0, 1.5, escapes)
+    np.testing.assert_allclose(rows, coat_rows(n, v, light, 0, 1.5) * escapes[:, None], rtol=1e-12)
+    assert np.all(rows[escapes == 0] == 0) and np.all(rows[escapes == 1] > 0)
+
+
+def test_mirror_escapes_reads_the_shadow_function_at_the_nearest_direction():
+    """Face 0 sees every direction, face 1 only those above 60 degrees elevation: an
+    observation escapes where its face sees the sample direction nearest its mirror direction."""
+    sampling = sphere_sampling(300)
+    sees = np.stack([np.ones(300, bool), sampling.directions[:, 1] > np.sin(np.radians(60))])
+    visibility = Visibility(np.packbits(sees, axis=1), 300)
+    n, v = _views_of_upward_faces(400, 5)
+    face = np.arange(400) % 2
+    out = mirror_escapes(face, n, v, sampling, visibility)
+    nearest = sampling.directions[sampling.nearest(mirror_directions(n, v))]
+    expected = np.where(face == 0, 1.0, nearest[:, 1] > np.sin(np.radians(60)))
+    np.testing.assert_array_equal(out, expected)
+    assert 0 < out[face == 1].mean() < 1                        # both cases occur
+
+
+def test_the_mean_levels_reflection_is_recovered_beside_any_diffuse():
+    """A coat reflecting an even environment of level k where the object does not block the
+    mirror direction: the degree-0 rows (the Fresnel factor times the escape) give k back,
+    whatever each face's diffuse level."""
+    rng = np.random.default_rng(6)
+    faces, views, level = 300, 10, 0.4
+    face = np.repeat(np.arange(faces), views)
+    n, v = _views_of_upward_faces(faces * views, 7)
+    escapes = (rng.uniform(size=faces * views) > 0.2).astype(float)
+    reflection = level * fresnel_dielectric(v[:, 1], 1.5) * escapes
+    rgb = rng.uniform(0.02, 0.8, size=(faces, 3))[face] + reflection[:, None]
+    unit = np.zeros((1, 3))
+    unit[0] = 1.0 / sh.basis(0, v[:1])[0, 0]                  # a light of radiance 1 in every direction
+    k = fit_coat(face, rgb, coat_rows(n, v, unit, 0, 1.5, escapes), faces)
+    np.testing.assert_allclose(k, level, rtol=1e-6)
 
 
 @pytest.mark.parametrize("true_k", [0.0, 0.05])

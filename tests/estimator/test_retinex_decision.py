@@ -161,3 +161,36 @@ def test_the_default_reports_its_stages_as_it_goes():
     estimate(data, None, micro_config(), log=lines.append)
     stages = [line.split(" ")[0] for line in lines]
     assert "light" in stages and stages.index("observations:") < stages.index("light")
+
+
+@pytest.mark.parametrize("level", [0.0, 2.0])
+def test_the_coat_correction_keeps_the_cheapest_of_its_reflections(level):
+    """The micro scene's colours with a coat's reflection of an even environment of ``level``
+    added (the Fresnel factor where the mirror direction escapes the object): the coat's
+    reflections of the environment's mean level (degree 0) and of the light's low orders are
+    each removed and judged with the uncorrected fit by the prediction cost; the cheapest is
+    kept and reported. Without a reflection the correction is not applied."""
+    from dataclasses import replace
+
+    from estimator.light.coat import mirror_escapes
+    from estimator.methods.retinex_segmented.method import RetinexSegmented
+    from estimator.model.reflection import fresnel_dielectric
+    from estimator.pipeline.prepared import prepare
+
+    config = micro_config()
+    data, _ = micro_scene(config)
+    prep = prepare(data, config)
+    obs = prep.obs
+    normals = data.mesh.face_normals[obs.face]
+    reflection = level * fresnel_dielectric(np.sum(normals * obs.view_dir, axis=1), config.coat_ior) * mirror_escapes(
+        obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
+    prep = replace(prep, obs=replace(obs, rgb=obs.rgb + reflection[:, None]))
+    info = RetinexSegmented(config).solve_held(prep).estimate.info
+    costs = info["coat_costs"]
+    kept = min(costs, key=costs.get)
+    assert set(costs) <= {"none", "degree 0", f"degree {config.coat_order}"} and "none" in costs
+    if level == 0:
+        assert kept == "none" and info["coat_degree"] is None and not np.any(info["coat_weight"])
+    else:
+        assert len(costs) == 3 and kept != "none"
+        assert kept == f"degree {info['coat_degree']}" and np.all(np.array(info["coat_weight"]) > 0)

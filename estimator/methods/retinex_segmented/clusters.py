@@ -29,7 +29,7 @@ from .shading import divide_shade, in_unit_dc
 from .values import FitContext, LightSource, ReflectionFits, Solution
 
 # what the estimate of the whole mesh keeps from the clustered problem's: how its light was chosen
-CARRIED = ("hypotheses", "coat_weight", "coat_costs", "reflection_explained", "lobe_explained")
+CARRIED = ("hypotheses", "coat_weight", "coat_costs", "coat_degree", "reflection_explained", "lobe_explained")
 
 
 def face_clusters(mesh, observed: np.ndarray, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -86,7 +86,9 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
     c, h, model = method.config, part.hypothesis, method.model
     mesh, obs = prep.data.mesh, prep.obs
     if part.coat is not None:
-        rows = coat.coat_rows(mesh.face_normals[obs.face], obs.view_dir, part.coat.light, c.coat_order, c.coat_ior)
+        normals = mesh.face_normals[obs.face]
+        escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
+        rows = part.coat.rows(normals, obs.view_dir, c.coat_ior, escapes)
         obs = replace(obs, rgb=obs.rgb - part.coat.weight[0] * rows)   # one coat group: coat_per_region is not carried
         prep = replace(prep, obs=obs)
     f = mesh.num_faces

@@ -77,13 +77,14 @@ class RetinexSegmented(Method):
     5. The specular albedo is solved with that light fixed (per region; faces outside every
        region share the regions' median, or, without regions, the median of every face's own fit).
     6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
-       light's low orders (``coat_order``) is fitted to the colours' changes across views
+       environment's mean level and, apart, of the light's low orders (``coat_order``), each
+       where the mirror direction escapes the object, is fitted to the colours' changes across views
        (:mod:`estimator.light.coat`), with ``coat_per_region`` a grey coat's strength per
        uniform region (a matte part takes none; the other faces share one), scaled down until
        at most ``coat_max_negative`` more of the observations would turn non-positive,
-       subtracted, and steps 1-5 run again; the corrected fit is kept when it predicts the
-       colours as recorded (its coat's reflection added back) at a lower
-       :func:`.decision.prediction_cost`, the weights its unknowns (three with one weight).
+       subtracted, and steps 1-5 run again; of the uncorrected and the corrected fits the one
+       that predicts the colours as recorded (a coat's reflection added back) at the lowest
+       :func:`.decision.prediction_cost` is kept, the weights its unknowns (three with one weight).
 
     With ``interreflection`` each face's shading also holds the light the object reflects
     onto it (:mod:`estimator.light.indirect`). Beside the edges' light, the light of the coat's
@@ -123,39 +124,59 @@ class RetinexSegmented(Method):
                  f"{time.perf_counter() - t:.1f} s")
         weight, applied = np.zeros((1, 3)), None
         if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
-            obs = prep.obs
-            rows = coat.coat_rows(prep.data.mesh.face_normals[obs.face], obs.view_dir,
-                                  est.light, c.coat_order, c.coat_ior)
-            group, groups = coat_groups(est, c.coat_per_region)
-            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, group=group[obs.face],
-                                   num_groups=groups)
-            weight = weight * coat.admissible_scale(obs.rgb, weight[group[obs.face]] * rows, c.coat_max_negative,
-                                                    group=group[obs.face], num_groups=groups)[:, None]
-            reflection = weight[group[obs.face]] * rows
-            coat_level = np.median(np.linalg.norm(reflection, axis=1))
-            if coat_level > c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1)):
-                s = est.info["sun"]
-                found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
-                                      c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
-                coated, coated_chosen = self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits,
-                                                  found)
-                # the same criterion, on the colours as observed: the coated fit predicts them
-                # with its coat's reflection added back, at one more unknown per region's
-                # strength and two for the grey coat's shared colour (three with one group)
-                costs = prediction_cost(prep, [est, coated], [None, reflection],
-                                        [0, len(np.unique(group[obs.face])) + 2])
-                if costs[1] < costs[0]:
-                    est, chosen, applied = coated, coated_chosen, CoatReflection(est.light, weight)
-                else:
-                    weight = np.zeros_like(weight)  # the coat does not pay its way: not applied
-                self.log(f"coat's reflection {'removed' if costs[1] < costs[0] else 'not removed'} (cost "
-                         f"{costs[1]:.4g} against {costs[0]:.4g} without), {time.perf_counter() - t:.1f} s")
-                est.info["coat_costs"] = costs.tolist()
-            else:
-                weight = np.zeros_like(weight)  # negligible: not applied
+            est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t)
+            if applied is not None:
+                weight = applied.weight
+        est.info["coat_degree"] = None if applied is None else applied.order
         est.info["coat_weight"] = weight.tolist()
         est.info["clustering_s"] = time.perf_counter() - t
         return Solution(est, chosen, applied, fits)
+
+    def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis,
+                      t: float) -> tuple[Estimate, Hypothesis, CoatReflection | None]:
+        """Step 6: the coat's reflection of the environment's mean level (SH degree 0) and of the
+        light's low orders (``coat_order``), each fitted to the colours' changes across views,
+        scaled down to ``coat_max_negative``, subtracted, and steps 1-5 run again (reusing the
+        sun found the first time); the uncorrected and the corrected fits are judged by
+        :func:`.decision.prediction_cost` on the colours as observed (each coat's reflection
+        added back, one unknown per region's strength and two for the grey coat's shared
+        colour: three with one group). Returns the estimate kept, its hypothesis and the
+        reflection subtracted before it (None: none)."""
+        c, obs = self.config, prep.obs
+        normals = prep.data.mesh.face_normals[obs.face]
+        escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
+        group, groups = coat_groups(est, c.coat_per_region)
+        group = group[obs.face]
+        level = c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1))
+        candidates = []
+        for order in sorted({0, c.coat_order}):
+            reflected = CoatReflection(est.light, np.ones((groups, 3)), order)
+            rows = reflected.rows(normals, obs.view_dir, c.coat_ior, escapes)
+            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, group=group,
+                                   num_groups=groups)
+            weight = weight * coat.admissible_scale(obs.rgb, weight[group] * rows, c.coat_max_negative,
+                                                    group=group, num_groups=groups)[:, None]
+            reflection = weight[group] * rows
+            if np.median(np.linalg.norm(reflection, axis=1)) > level:     # else negligible: not tried
+                candidates.append((replace(reflected, weight=weight), reflection))
+        est.info["coat_costs"] = None
+        if not candidates:
+            return est, chosen, None
+        s = est.info["sun"]
+        found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
+                              c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
+        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found)
+                  for _, reflection in candidates]
+        costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
+                                [0] + [len(np.unique(group)) + 2] * len(candidates))
+        best = int(np.argmin(costs))
+        named = {"none": float(costs[0]), **{f"degree {r.order}": float(x) for (r, _), x in zip(candidates, costs[1:])}}
+        self.log(f"coat's reflection: costs {named}, {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
+        applied = None
+        if best:
+            (est, chosen), applied = fitted[best - 1], candidates[best - 1][0]
+        est.info["coat_costs"] = named
+        return est, chosen, applied
 
     def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None) -> tuple[Estimate, Hypothesis]:
         """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
