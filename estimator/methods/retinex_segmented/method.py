@@ -77,8 +77,8 @@ class RetinexSegmented(Method):
     5. The specular albedo is solved with that light fixed (per region; faces outside every
        region share the regions' median, or, without regions, the median of every face's own fit).
     6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
-       environment's mean level and, apart, of the light's low orders (``coat_order``), each
-       where the mirror direction escapes the object, is fitted to the colours' changes across views
+       environment's mean level (where the mirror direction escapes the object) and, apart, of
+       the light's low orders (``coat_order``) is fitted to the colours' changes across views
        (:mod:`estimator.light.coat`), with ``coat_per_region`` a grey coat's strength per
        uniform region (a matte part takes none; the other faces share one), scaled down until
        at most ``coat_max_negative`` more of the observations would turn non-positive,
