@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core import sh
 from ..core.settings import Section
-from ..model.reflection import fresnel_dielectric, mirror_directions
+from ..model.reflection import fresnel_dielectric, mirror_directions, mirror_shadow
 from ..rays.visibility import SphereSampling, Visibility
 from ..solvers import robust
 
@@ -85,9 +85,8 @@ def mirror_escapes(face: np.ndarray, normals: np.ndarray, view_dir: np.ndarray, 
                    visibility: Visibility) -> np.ndarray:
     """(N,) 1.0 where the mirror direction of observation k (face ``face`` (N,), its normal
     (N, 3), unit direction to the camera (N, 3)) escapes the object, 0.0 where the object
-    blocks it: the shadow function at the sample direction nearest to it."""
-    mirror = mirror_directions(normals, view_dir)
-    return visibility.lookup(face, sampling.nearest(mirror)).astype(float)
+    blocks it (:func:`estimator.model.reflection.mirror_shadow`)."""
+    return mirror_shadow(face, mirror_directions(normals, view_dir), sampling, visibility).astype(float)
 
 
 def fit_coat(face: np.ndarray, rgb: np.ndarray, rows: np.ndarray, num_faces: int, loss: str = "cauchy",

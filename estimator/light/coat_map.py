@@ -34,7 +34,7 @@ from scipy import linalg, sparse
 from ..core import latlong, sh
 from ..core.errors import InputError
 from ..core.settings import Section
-from ..model.reflection import fresnel_dielectric, mirror_directions
+from ..model.reflection import fresnel_dielectric, mirror_directions, mirror_shadow
 from ..rays.visibility import SphereSampling, Visibility
 from ..solvers import robust
 from .coat import CoatConfig
@@ -264,7 +264,7 @@ def _reflecting_rows(face, view_dir, normals, sampling, visibility, ior):
     n = normals[face]
     cos = np.sum(n * view_dir, axis=1)
     mirror = mirror_directions(n, view_dir)
-    keep = (cos > 0) & visibility.lookup(face, sampling.nearest(mirror))
+    keep = (cos > 0) & mirror_shadow(face, mirror, sampling, visibility)
     return keep, mirror[keep], fresnel_dielectric(cos[keep], ior)
 
 

@@ -53,6 +53,13 @@ def mirror_directions(normals: np.ndarray, view_dir: np.ndarray) -> np.ndarray:
     return 2.0 * np.sum(normals * view_dir, axis=1, keepdims=True) * normals - view_dir
 
 
+def mirror_shadow(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
+                  visibility: Visibility) -> np.ndarray:
+    """(N,) bool: the shadow function of face ``faces`` (N,) at the sample direction nearest to
+    each unit mirror direction (N, 3): True where it escapes the object."""
+    return visibility.lookup(faces, sampling.nearest(mirror))
+
+
 def mirror_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
                   visibility: Visibility, order: int) -> np.ndarray:
     """D_lm^(i)(r) = Y_lm(r) s_i(r), the paper's mirror term (Eq. 10): the shadow
@@ -67,8 +74,7 @@ def mirror_matrix(faces: np.ndarray, mirror: np.ndarray, sampling: SphereSamplin
     -------
     (N, (L + 1)^2) float64, multiplying the pseudo illumination h.
     """
-    shadow = visibility.lookup(faces, sampling.nearest(mirror))
-    return sh.basis(order, mirror) * shadow[:, None]
+    return sh.basis(order, mirror) * mirror_shadow(faces, mirror, sampling, visibility)[:, None]
 
 
 def phong_lobe(mirror: np.ndarray, directions: np.ndarray, exponent: float) -> np.ndarray:
