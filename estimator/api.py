@@ -1,4 +1,5 @@
-"""The estimator's one entry point, :func:`estimate`: pose check, preparation, the method's solve, trust diagnostics."""
+"""The estimator's one entry point, :func:`estimate`: pose check, preparation, the method's solve, screening, trust
+diagnostics."""
 from __future__ import annotations
 
 import time
@@ -15,7 +16,7 @@ from .methods.base import REGISTRY
 from .model.estimate import Estimate
 from .model.reflection_models import reflection_model
 from .pipeline import exposure, pose
-from .pipeline.prepared import prepare, with_config
+from .pipeline.prepared import Prepared, prepare, with_config
 from .rays.raycast import RayCaster
 
 EXPONENT_CANDIDATES = (5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0)
@@ -62,34 +63,14 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     if rounds > 0:
         fixed = replace(config, pose_rounds=0, auto_pose=0.0)
         data, poses = pose.refine_poses(
-            data, lambda d: estimate(d, method, fixed, known_sh, known_radiance, None, exponent_candidates, caster),
+            data, lambda d, prior: _fit(d, cls, fixed, known_sh, known_radiance, None, exponent_candidates, caster,
+                                        prior)[0],
             rounds, min(config.pose_folds, len(data.views)), caster, log)
     pose_seconds = time.perf_counter() - t0
-    prep = prepare(data, config, log, cls.name, cls.streams, caster,
-                   ", ".join(sorted(name for name, kind in REGISTRY.items() if kind.streams)))
-    gains = None
-    if config.view_gains:
-        gains = exposure.view_gains(prep.obs)
-        prep = exposure.divide_gains(prep, gains)
-        if log:
-            log(f"view gains: {gains.min():.3f} to {gains.max():.3f} over the views and channels")
-    if not np.any(prep.obs.rgb > 0):
-        raise InputError("every observed pixel is black or negative: there is no light to estimate from "
-                         "(check the images' exposure and sign)")
+    est, prep, gains, solve_seconds = _fit(data, cls, config, known_sh, known_radiance, log, exponent_candidates,
+                                           caster)
     t = time.perf_counter()
-    try:
-        est = _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates)
-    except np.linalg.LinAlgError as exc:
-        raise InputError(f"the solve is singular ({exc}): the observations do not determine the albedos and "
-                         "the light (too few lit views or faces?)") from None
-    if not np.all(np.isfinite(est.pseudo_sh)):
-        raise InputError("the solve produced a non-finite light: the observations do not determine the albedos and "
-                         "the light (too few lit views or faces?)")
-    solve_seconds = time.perf_counter() - t
-    t = time.perf_counter()
-    est.info["trust"], stats, unestimated = _screen_and_diagnose(prep, est, [v.name for v in data.views],
-                                                                  cls.reports_residual)
-    est.info["unestimated"] = unestimated
+    est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
     if gains is not None:
         est.info["view_gains"] = {v.name: g.tolist() for v, g in zip(data.views, gains)}
     est.info["observations"] = int(len(prep.obs.face))
@@ -120,13 +101,43 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     return est
 
 
-def _screen_and_diagnose(prep, est: Estimate, view_names: list[str],
-                         fitted: bool) -> tuple[dict, dict, dict[str, int]]:
+def _fit(data: MultiViewData, cls, config: EstimatorConfig, known_sh, known_radiance, log, exponent_candidates,
+         caster: RayCaster, prior: Estimate | None = None) -> tuple[Estimate, Prepared, np.ndarray | None, float]:
+    """The shared stages, the exposure gains, the method's solve and the screening of faces
+    whose albedo the data do not determine, without the trust diagnostics (a held-out
+    estimate of the pose refinement needs only the estimate). Returns (the estimate with
+    ``info['unestimated']``, the prepared problem, the views' gains or None, the solve's seconds).
+    ``prior``: an estimate of the same scene from other views, where the method may start."""
+    prep = prepare(data, config, log, cls.name, cls.streams, caster,
+                   ", ".join(sorted(name for name, kind in REGISTRY.items() if kind.streams)))
+    gains = None
+    if config.view_gains:
+        gains = exposure.view_gains(prep.obs)
+        prep = exposure.divide_gains(prep, gains)
+        if log:
+            log(f"view gains: {gains.min():.3f} to {gains.max():.3f} over the views and channels")
+    if not np.any(prep.obs.rgb > 0):
+        raise InputError("every observed pixel is black or negative: there is no light to estimate from "
+                         "(check the images' exposure and sign)")
+    t = time.perf_counter()
+    try:
+        est = _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates, prior)
+    except np.linalg.LinAlgError as exc:
+        raise InputError(f"the solve is singular ({exc}): the observations do not determine the albedos and "
+                         "the light (too few lit views or faces?)") from None
+    if not np.all(np.isfinite(est.pseudo_sh)):
+        raise InputError("the solve produced a non-finite light: the observations do not determine the albedos and "
+                         "the light (too few lit views or faces?)")
+    solve_seconds = time.perf_counter() - t
+    est.info["unestimated"] = _screen(prep, est, cls.reports_residual)
+    return est, prep, gains, solve_seconds
+
+
+def _screen(prep: Prepared, est: Estimate, fitted: bool) -> dict[str, int]:
     """Faces whose albedo the data do not determine marked unestimated
-    (:mod:`estimator.diagnostics.screening`), then the trust diagnostics of what remains.
-    ``fitted``: the method fits the reflection model to the observations, so each albedo's
-    standard error under it is its own (a method that fits nothing is judged by range only).
-    Returns the trust summary, its per-face arrays and the count of faces set aside per reason."""
+    (:mod:`estimator.diagnostics.screening`). ``fitted``: the method fits the reflection
+    model to the observations, so each albedo's standard error under it is its own (a method
+    that fits nothing is judged by range only). Returns the count of faces set aside per reason."""
     counts = screening.mark_unestimated(est, screening.out_of_range(est))
     if not est.observed.any():
         raise InputError("no face has a finite albedo within the physical range: the observations do not "
@@ -143,11 +154,10 @@ def _screen_and_diagnose(prep, est: Estimate, view_names: list[str],
         if not est.observed.any():
             raise InputError("no face's albedo is determined by the observations (each one's standard error "
                              "exceeds its value): add views or light")
-    summary, stats = trust.diagnose(prep, est, view_names)
-    return summary, stats, counts
+    return counts
 
 
-def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates) -> Estimate:
+def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates, prior=None) -> Estimate:
     if exponent_candidates:
         if not reflection_model(config).uses_exponent:
             raise InputError("estimating the Phong exponent needs a model that depends on it: "
@@ -157,7 +167,7 @@ def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates
                              "none (choose a method that fits the observations, or give the exponent)")
         tried = {}
         for n in exponent_candidates:
-            candidate = cls(replace(config, phong_exponent=float(n)), known_sh, known_radiance)
+            candidate = cls(replace(config, phong_exponent=float(n)), known_sh, known_radiance, prior=prior)
             tried[float(n)] = candidate.solve(with_config(prep, candidate.config))
             if log:
                 log(f"phong exponent {n}: residual {tried[float(n)].info['residuals'][-1]:.5f}")
@@ -167,4 +177,4 @@ def _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates
             log(f"phong exponent chosen: {est.config.phong_exponent:g} (the lowest final residual, "
                 f"{est.info['residuals'][-1]:.5f})")
         return est
-    return cls(config, known_sh, known_radiance, log).solve(prep)
+    return cls(config, known_sh, known_radiance, log, prior).solve(prep)

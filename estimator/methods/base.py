@@ -48,8 +48,13 @@ class Method(ABC):
     reports_residual: ClassVar[bool] = True
 
     def __init__(self, config: EstimatorConfig, known_sh: np.ndarray | None = None,
-                 known_radiance: np.ndarray | None = None, log=None):
+                 known_radiance: np.ndarray | None = None, log=None, prior: Estimate | None = None):
         self.config = config
+        # an estimate of the same object and light from other views (the pose refinement's
+        # previous held-out estimate): a method may start its light there. On a well-determined
+        # problem the result is the cold start's within the solver's tolerance; where the data
+        # leave several local optima, the one reached may differ
+        self.prior = prior
         self.model = reflection_model(config)
         self.known_sh = known_sh
         self.known_radiance = known_radiance
@@ -85,18 +90,25 @@ class Method(ABC):
         loss of its relative residual. The result's ``weights`` are the final ones."""
         base = np.ones(len(prep.obs.face)) if weights is None else weights
         if self.loss == "none":
-            result = self._weighted_solve(prep, face_group, num_groups, fixed_light, weights)
+            result = self._weighted_solve(prep, face_group, num_groups, fixed_light, weights, self._prior_light())
             result.weights = base
             return result
         w = base * self._initial_weights(prep)
         result = None
         for round_ in range(self.config.robust_rounds + 1):
             result = self._weighted_solve(prep, face_group, num_groups, fixed_light, w,
-                                          None if result is None else result.light)
+                                          self._prior_light() if result is None else result.light)
             if round_ < self.config.robust_rounds:
                 w = base * self._reweight(prep, face_group, result, base)
         result.weights = w
         return result
+
+    def _prior_light(self) -> np.ndarray | None:
+        """(M, 3) the prior estimate's light unknown where it has this model's shape, else None."""
+        if self.prior is None or self.prior.model.light != self.model.light:
+            return None
+        light = self.prior.light
+        return light if light is not None and light.shape == ((self.config.sh_order + 1) ** 2, 3) else None
 
     @property
     def loss(self) -> str:

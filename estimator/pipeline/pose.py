@@ -336,7 +336,8 @@ def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
             and change["translation"] <= POSE_MAX_SHIFT * np.linalg.norm(before.center - centre))
 
 
-def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate], rounds: int = POSE_ROUNDS,
+def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate | None], Estimate],
+                 rounds: int = POSE_ROUNDS,
                  folds: int = PoseConfig.pose_folds, caster: RayCaster | None = None, log=None
                  ) -> tuple[MultiViewData, list[dict]]:
     """Every training view's camera refined, the mesh and images kept.
@@ -352,7 +353,9 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
 
     Parameters
     ----------
-    solve : MultiViewData -> Estimate (the method that will run on the refined data).
+    solve : (MultiViewData, prior) -> Estimate: the method that will run on the refined data;
+        ``prior`` is the held-out estimate of the same view group in the previous round, or
+        the previous group's in the first (None for the first), where the solve may start.
     caster : ray queries of ``data.mesh`` (None: built with the default variant).
     rounds : alignment rounds (at least 1).
     folds : view groups per round (2 to the number of views). When an estimate from the
@@ -393,11 +396,13 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData], Estimate]
         if log:
             log(f"pose refinement: {n} views in {folds} groups leave under {POSE_MIN_VIEWS} views per held-out "
                 "estimate; only the silhouette step ran")
+    estimates: list[Estimate | None] = [None] * folds
     for r in range(rounds):
         for k in range(folds):
             held = [i for i in range(n) if i % folds == k]
-            predictor = Predictor(data.mesh, solve(dataclasses.replace(data, views=[
-                v for i, v in enumerate(views) if i % folds != k])), caster)
+            estimates[k] = solve(dataclasses.replace(data, views=[v for i, v in enumerate(views) if i % folds != k]),
+                                 estimates[k] if r > 0 else estimates[k - 1])
+            predictor = Predictor(data.mesh, estimates[k], caster)
             for i in held:
                 cam, last[i] = refine_view(views[i], predictor)
                 diverged[i] = not plausible(data.views[i].camera, cam, centre)

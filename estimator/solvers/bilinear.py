@@ -117,10 +117,13 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
     """
     lam, lam_raise, lam_lower, lam_max = schedule
     rows = _component_rows(components, c_rows, d_rows)
-    indicator = sparse.csr_matrix((np.ones(len(group)), (group, np.arange(len(group)))),
-                                  shape=(num_groups, len(group)))
-    # the (N, M) Jacobian and one product are refilled in place every step: a fresh array of
-    # this size costs more in page faults than the arithmetic that fills it
+    # the groups' sums as one sparse (G, N) matrix whose entries are refilled each step:
+    # its row g holds the observations of group g in order, so ``data`` is ``x[order]``
+    order = np.argsort(group, kind="stable")
+    members = sparse.csr_matrix((np.ones(len(group)), order, np.r_[0, np.cumsum(
+        np.bincount(group, minlength=num_groups))]), shape=(num_groups, len(group)))
+    # the (N, M) Jacobian is refilled in place every step: a fresh array of this size costs
+    # more in page faults than the arithmetic that fills it
     jac, scratch = np.empty(c_rows.shape), np.empty(c_rows.shape)
 
     def model(alb_, h_):
@@ -138,16 +141,24 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
         u = np.stack([np.stack([np.bincount(group, feats[:, i] * feats[:, j], minlength=num_groups)
                                 for j in range(p)], -1) for i in range(p)], -2)  # (G, P, P)
         g_alb = np.stack([np.bincount(group, feats[:, i] * e, minlength=num_groups) for i in range(p)], -1)
-        w = np.stack([indicator @ np.multiply(jac, feats[:, i, None], out=scratch) for i in range(p)], 1)  # (G, P, M)
+        # w[g, q] = sum over group g of feats_q jac = sum_i alb[g, i] (sum of feats_q rows_i):
+        # sparse products with the fixed rows, not with a scaled copy of the Jacobian
+        w = np.zeros((num_groups, p, m))
+        for q in range(p):
+            members.data = feats[order, q]
+            for i in range(p):
+                w[:, q] += alb[:, i, None] * (members @ rows[i])
         v = jac.T @ jac
         g_h = jac.T @ e
         while True:
             u_d = u + lam * (u * np.eye(p)) + 1e-12 * np.eye(p)
             v_d = v + lam * np.diag(np.diag(v)) + 1e-12 * np.trace(v) / m * np.eye(m)
-            u_inv = np.linalg.inv(u_d)
-            u_inv_w = u_inv @ w                                                # (G, P, M)
-            # one GEMM over the (group, component) rows: einsum's contraction does not use BLAS
-            schur = v_d - w.reshape(-1, m).T @ u_inv_w.reshape(-1, m)
+            # u_d^-1 = root^T root (root: the inverse Cholesky factor), so the Schur complement's
+            # product is a symmetric rank-k update, half the work of a general product
+            root = np.linalg.inv(np.linalg.cholesky(u_d))                      # (G, P, P)
+            u_inv = np.swapaxes(root, 1, 2) @ root
+            half = (root @ w).reshape(-1, m)                                   # (G P, M)
+            schur = v_d - half.T @ half
             rhs = g_h - w.reshape(-1, m).T @ np.einsum("gpq,gq->gp", u_inv, g_alb).reshape(-1)
             dh = np.linalg.solve(schur, rhs)
             dalb = np.einsum("gpq,gq->gp", u_inv, g_alb - w @ dh)

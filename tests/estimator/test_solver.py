@@ -21,10 +21,15 @@ def _problem(rng, components, groups=30, per_group=40, m=16):
     return rgb, group, c_rows, d_rows, h, td, ts
 
 
+@pytest.mark.parametrize("shuffled", [False, True])
 @pytest.mark.parametrize("components", ["both", "specular", "diffuse"])
-def test_noise_free_bilinear_problem_is_solved_exactly(components):
+def test_noise_free_bilinear_problem_is_solved_exactly(components, shuffled):
+    """Exact recovery, whatever order the observations come in (the solver sums per group)."""
     rng = np.random.default_rng(3)
     rgb, group, c_rows, d_rows, h, td, ts = _problem(rng, components)
+    if shuffled:
+        order = rng.permutation(len(group))
+        rgb, group, c_rows, d_rows = rgb[order], group[order], c_rows[order], d_rows[order]
     res = solve_bilinear(rgb, group, c_rows, d_rows, 30, components, iterations=50, tol=1e-14)
     np.testing.assert_allclose(res.light[0], 1.0)                      # the gauge
     np.testing.assert_allclose(res.light, h, atol=1e-5)
