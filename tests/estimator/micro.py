@@ -18,15 +18,16 @@ def micro_config(**overrides) -> EstimatorConfig:
     return EstimatorConfig(**{"sh_order": ORDER, "directions": 300, "auto_pose": 0.0, **overrides})
 
 
-def micro_scene(config: EstimatorConfig | None = None) -> tuple[MultiViewData, Estimate]:
-    """The views and the true estimate (per-face albedos, the light) they were rendered from."""
+def micro_scene(config: EstimatorConfig | None = None, specular: float = 0.2) -> tuple[MultiViewData, Estimate]:
+    """The views and the true estimate (per-face albedos, the light) they were rendered from;
+    ``specular``: every face's grey specular albedo (a Phong lobe of exponent 10; 0: matte)."""
     config = config or micro_config()
     ico = trimesh.creation.icosphere(subdivisions=2)
     mesh = TriangleMesh(np.asarray(ico.vertices), np.asarray(ico.faces))
     f = mesh.num_faces
     top = mesh.centroids[:, 1] > 0.2
     diffuse = np.where(top[:, None], [0.7, 0.3, 0.1], [0.1, 0.4, 0.6])
-    specular = np.full((f, 3), 0.2)
+    specular = np.full((f, 3), float(specular))
     radiance = np.zeros((sh.num_coeffs(ORDER), 3))
     radiance[0] = 1.0
     radiance[sh.index(1, 1)] = [0.5, 0.45, 0.4]     # brighter towards +Y

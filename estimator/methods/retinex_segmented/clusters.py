@@ -67,7 +67,7 @@ def solve_on_clusters(method, prep: Prepared) -> Estimate:
     cluster, representative = face_clusters(prep.data.mesh, np.nonzero(prep.obs.observed_faces())[0],
                                             c.light_faces)
     method.log(f"the light from {len(representative)} clusters of faces")
-    part = method.solve_held(prep.clustered(cluster, representative))
+    part = method.solve_held(prep.clustered(cluster, representative), keep_regions=False)
     est = extend(method, prep, part)
     est.info.update({k: part.estimate.info[k] for k in CARRIED if k in part.estimate.info})
     est.info["light_faces"] = int(len(representative))

@@ -20,18 +20,23 @@ from ...model.estimate import Estimate
 from ...pipeline.prepared import Prepared
 from ...solvers.robust import TUNING, relative_residuals, robust_scale
 from .coat import coat_map_candidate, coat_map_hypothesis, coated_diffuse_hypothesis
-from .edges import edge_hypothesis, parted_regions
+from .edges import edge_hypothesis, kept_regions, parted_regions
 from .lobe import lobe_candidate, lobe_hypothesis
 from .values import FitContext, Hypothesis, LightSource
 
 
-def light_hypotheses(ctx: FitContext, radiance: np.ndarray, found: Sun | None) -> list[Hypothesis]:
+def light_hypotheses(ctx: FitContext, radiance: np.ndarray, found: Sun | None,
+                     labels: np.ndarray | None = None) -> list[Hypothesis]:
     """Every light hypothesis of one fit, the edges' first.
 
     ``radiance`` (F, 3): each face's diffuse radiance (a low quantile over the views);
-    ``found``: the sun of an earlier fit (None: the edge stage searches for one)."""
+    ``found``: the sun of an earlier fit (None: the edge stage searches for one); ``labels``
+    (F,): the uniform regions of an earlier fit, tied as they are for one more hypothesis
+    (:func:`.edges.kept_regions`; None: none)."""
     edges = edge_hypothesis(ctx, radiance, found)
     out = [edges]
+    if labels is not None:
+        out.append(kept_regions(ctx, edges, labels))            # None: no lit face in a region
     if edges.source is LightSource.EDGES_AND_REGIONS:
         out.append(parted_regions(ctx, edges))                  # None: no region parts under the tied light
     coat_map = coat_map_candidate(ctx, regions=edges.regions > 0)

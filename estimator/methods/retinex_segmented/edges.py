@@ -98,3 +98,31 @@ def parted_regions(ctx: FitContext, tied: Hypothesis) -> Hypothesis | None:
     albedo[inside] = region_albedo[labels[inside]]
     return Hypothesis(tied.radiance, light, tied.shading, albedo, lit, labels, regions, tied.share,
                       LightSource.EDGES_AND_PARTED_REGIONS, tied.found, tied.deviation, tied.drift)
+
+
+
+def kept_regions(ctx: FitContext, edges: Hypothesis, labels: np.ndarray) -> Hypothesis | None:
+    """The light fitted to the edges of ``edges.radiance`` with the uniform regions ``labels``
+    (F,) of an earlier fit tied, as they are (no region gate, no faces joined or parted); None
+    when no lit face lies in a region.
+
+    The coat's correction (:meth:`.method.RetinexSegmented._correct_coat`) passes the first
+    fit's regions: a partition found in the colours as recorded is a hypothesis of the
+    corrected colours too, where a reflection removed where it was not quite there can leave
+    the faces of a region too noisy for the segmentation or the region gates to find it again
+    (a rough coat: development seed 1000 lost its five regions to a texture). The prediction
+    cost decides among it and the corrected colours' own hypotheses."""
+    tied = edges.lit & (labels >= 0)
+    if not tied.any():
+        return None
+    ids, compact = np.unique(labels[tied], return_inverse=True)   # regions without a lit face dropped
+    labels = np.full(len(labels), -1, dtype=np.int64)
+    labels[tied] = compact
+    light, region_albedo = edge_fit.log_shading_fit(edges.radiance, edges.shading.columns, ctx.edges, ctx.usable,
+                                                    labels, initial=edges.light, **ctx.fit)
+    albedo, lit = divide(edges.shading, edges.radiance, light, ctx.usable, ctx.extra)
+    labels = np.where(lit, labels, -1)
+    inside = labels >= 0
+    albedo[inside] = region_albedo[labels[inside]]
+    return Hypothesis(edges.radiance, light, edges.shading, albedo, lit, labels, len(ids),
+                      float(np.mean(inside[lit])), LightSource.EDGES_AND_KEPT_REGIONS, edges.found)

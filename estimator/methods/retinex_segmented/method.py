@@ -82,7 +82,8 @@ class RetinexSegmented(Method):
        (:mod:`estimator.light.coat`), with ``coat_per_region`` a grey coat's strength per
        uniform region (a matte part takes none; the other faces share one), scaled down until
        at most ``coat_max_negative`` more of the observations would turn non-positive,
-       subtracted, and steps 1-5 run again; of the uncorrected and the corrected fits the one
+       subtracted, and steps 1-5 run again (with the first fit's regions, tied as they are,
+       one more hypothesis); of the uncorrected and the corrected fits the one
        that predicts the colours as recorded (a coat's reflection added back) at the lowest
        :func:`.decision.prediction_cost` is kept, the weights its unknowns (three with one weight).
 
@@ -112,10 +113,12 @@ class RetinexSegmented(Method):
             return solve_on_clusters(self, prep)
         return self.solve_held(prep).estimate
 
-    def solve_held(self, prep) -> Solution:
+    def solve_held(self, prep, keep_regions: bool = True) -> Solution:
         """Steps 1-6 on a problem whose rows are held; the estimate with the hypothesis it came
         from and the coat's reflection subtracted before it (what :func:`.clusters.extend`
-        carries from clusters to faces)."""
+        carries from clusters to faces). ``keep_regions``: offer the coat's refits the first
+        fit's regions tied as they are (off on clusters, whose regions the extension to faces
+        finds again by segmentation: regions kept without it could not be carried)."""
         c = self.config
         t = time.perf_counter()
         fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations
@@ -124,7 +127,7 @@ class RetinexSegmented(Method):
                  f"{time.perf_counter() - t:.1f} s")
         weight, applied = np.zeros((1, 3)), None
         if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
-            est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t)
+            est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t, keep_regions)
             if applied is not None:
                 weight = applied.weight
         est.info["coat_degree"] = None if applied is None else applied.order
@@ -132,16 +135,16 @@ class RetinexSegmented(Method):
         est.info["clustering_s"] = time.perf_counter() - t
         return Solution(est, chosen, applied, fits)
 
-    def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis,
-                      t: float) -> tuple[Estimate, Hypothesis, CoatReflection | None]:
+    def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis, t: float,
+                      keep_regions: bool = True) -> tuple[Estimate, Hypothesis, CoatReflection | None]:
         """Step 6: the coat's reflection of the environment's mean level (SH degree 0) and of the
         light's low orders (``coat_order``), each fitted to the colours' changes across views,
         scaled down to ``coat_max_negative``, subtracted, and steps 1-5 run again (reusing the
-        sun found the first time); the uncorrected and the corrected fits are judged by
-        :func:`.decision.prediction_cost` on the colours as observed (each coat's reflection
-        added back, one unknown per region's strength and two for the grey coat's shared
-        colour: three with one group). Returns the estimate kept, its hypothesis and the
-        reflection subtracted before it (None: none)."""
+        sun found the first time, and with ``keep_regions`` the first fit's regions tied as they are); the
+        uncorrected and the corrected fits are judged by :func:`.decision.prediction_cost` on
+        the colours as observed (each coat's reflection added back, one unknown per region's
+        strength and two for the grey coat's shared colour: three with one group). Returns the
+        estimate kept, its hypothesis and the reflection subtracted before it (None: none)."""
         c, obs = self.config, prep.obs
         normals = prep.data.mesh.face_normals[obs.face]
         escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
@@ -165,7 +168,8 @@ class RetinexSegmented(Method):
         s = est.info["sun"]
         found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
                               c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
-        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found)
+        regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
+        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions)
                   for _, reflection in candidates]
         costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
                                 [0] + [len(np.unique(group)) + 2] * len(candidates))
@@ -178,10 +182,12 @@ class RetinexSegmented(Method):
         est.info["coat_costs"] = named
         return est, chosen, applied
 
-    def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None) -> tuple[Estimate, Hypothesis]:
+    def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None,
+             labels: np.ndarray | None = None) -> tuple[Estimate, Hypothesis]:
         """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
-        (None: search for one when ``sun_min_gain`` < 1). Returns the chosen estimate and its
-        hypothesis."""
+        (None: search for one when ``sun_min_gain`` < 1); ``labels``: an earlier fit's uniform
+        regions, offered tied as they are (:func:`.edges.kept_regions`). Returns the chosen
+        estimate and its hypothesis."""
         c = self.config
         mesh, obs = prep.data.mesh, prep.obs
         radiance = group_quantile(obs.face, obs.rgb, mesh.num_faces, c.retinex_quantile)
@@ -196,7 +202,7 @@ class RetinexSegmented(Method):
         if c.interreflection:
             ctx.fit["indirect"] = ctx.extra = indirect.indirect_shading(
                 prep.caster, prep.sampling, prep.visibility, np.where(usable[:, None], radiance, 0.0))
-        hypotheses = light_hypotheses(ctx, radiance, found)
+        hypotheses = light_hypotheses(ctx, radiance, found, labels)
         estimates = [to_estimate(ctx, h, self) for h in hypotheses]
         best = choose(prep, hypotheses, estimates)
         return estimates[best], hypotheses[best]

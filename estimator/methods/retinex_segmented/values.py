@@ -28,6 +28,7 @@ class LightSource(str, Enum):
     EDGES = "edges"
     EDGES_AND_REGIONS = "edges and regions"
     EDGES_AND_PARTED_REGIONS = "edges and parted regions"
+    EDGES_AND_KEPT_REGIONS = "edges and the first fit's regions"
     COAT_MAP = "reflection"
     COAT_MAP_AND_REGIONS = "reflection and regions"
     COAT_MAP_DIFFUSE = "reflection's diffuse, edges' light"
