@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
+from ..core import sh
 from ..core.errors import InputError
 from ..model.estimate import Estimate
 from ..model.reflection_models import reflection_model
@@ -108,7 +109,7 @@ class Method(ABC):
         if self.prior is None or self.prior.model.light != self.model.light:
             return None
         light = self.prior.light
-        return light if light is not None and light.shape == ((self.config.sh_order + 1) ** 2, 3) else None
+        return light if light is not None and light.shape == (sh.num_coeffs(self.config.sh_order), 3) else None
 
     @property
     def loss(self) -> str:

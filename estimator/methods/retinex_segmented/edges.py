@@ -90,15 +90,9 @@ def parted_regions(ctx: FitContext, tied: Hypothesis) -> Hypothesis | None:
     regions = int(labels.max()) + 1
     if regions <= tied.regions:
         return None
-    light, region_albedo = edge_fit.log_shading_fit(tied.radiance, tied.shading.columns, ctx.edges, ctx.usable, labels,
-                                                    initial=tied.light, **ctx.fit)
-    albedo, lit = divide(tied.shading, tied.radiance, light, ctx.usable, ctx.extra)
-    labels = np.where(lit, labels, -1)
-    inside = labels >= 0
-    albedo[inside] = region_albedo[labels[inside]]
+    light, albedo, lit, labels = _tied_fit(ctx, tied, labels)
     return Hypothesis(tied.radiance, light, tied.shading, albedo, lit, labels, regions, tied.share,
                       LightSource.EDGES_AND_PARTED_REGIONS, tied.found, tied.deviation, tied.drift)
-
 
 
 def kept_regions(ctx: FitContext, edges: Hypothesis, labels: np.ndarray) -> Hypothesis | None:
@@ -118,11 +112,20 @@ def kept_regions(ctx: FitContext, edges: Hypothesis, labels: np.ndarray) -> Hypo
     ids, compact = np.unique(labels[tied], return_inverse=True)   # regions without a lit face dropped
     labels = np.full(len(labels), -1, dtype=np.int64)
     labels[tied] = compact
-    light, region_albedo = edge_fit.log_shading_fit(edges.radiance, edges.shading.columns, ctx.edges, ctx.usable,
-                                                    labels, initial=edges.light, **ctx.fit)
-    albedo, lit = divide(edges.shading, edges.radiance, light, ctx.usable, ctx.extra)
+    light, albedo, lit, labels = _tied_fit(ctx, edges, labels)
+    return Hypothesis(edges.radiance, light, edges.shading, albedo, lit, labels, len(ids),
+                      float(np.mean(labels[lit] >= 0)), LightSource.EDGES_AND_KEPT_REGIONS, edges.found)
+
+
+def _tied_fit(ctx: FitContext, h: Hypothesis, labels: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The light fitted from ``h``'s with the regions ``labels`` (F,) tied, and under it each
+    face's albedo (a region's faces its region's), the lit faces and the labels of the lit
+    ones (-1 elsewhere)."""
+    light, region_albedo = edge_fit.log_shading_fit(h.radiance, h.shading.columns, ctx.edges, ctx.usable, labels,
+                                                    initial=h.light, **ctx.fit)
+    albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
     labels = np.where(lit, labels, -1)
     inside = labels >= 0
     albedo[inside] = region_albedo[labels[inside]]
-    return Hypothesis(edges.radiance, light, edges.shading, albedo, lit, labels, len(ids),
-                      float(np.mean(inside[lit])), LightSource.EDGES_AND_KEPT_REGIONS, edges.found)
+    return light, albedo, lit, labels

@@ -82,9 +82,9 @@ class RetinexSegmented(Method):
        (:mod:`estimator.light.coat`), with ``coat_per_region`` a grey coat's strength per
        uniform region (a matte part takes none; the other faces share one), scaled down until
        at most ``coat_max_negative`` more of the observations would turn non-positive,
-       subtracted, and steps 1-5 run again (with the first fit's regions, tied as they are,
-       one more hypothesis); of the uncorrected and the corrected fits the one
-       that predicts the colours as recorded (a coat's reflection added back) at the lowest
+       subtracted, and steps 1-5 run again (the first fit's regions, tied as they are, one more
+       hypothesis); of the uncorrected and the corrected fits the one that predicts the colours
+       as recorded (a coat's reflection added back) at the lowest
        :func:`.decision.prediction_cost` is kept, the weights its unknowns (three with one weight).
 
     With ``interreflection`` each face's shading also holds the light the object reflects
@@ -140,11 +140,12 @@ class RetinexSegmented(Method):
         """Step 6: the coat's reflection of the environment's mean level (SH degree 0) and of the
         light's low orders (``coat_order``), each fitted to the colours' changes across views,
         scaled down to ``coat_max_negative``, subtracted, and steps 1-5 run again (reusing the
-        sun found the first time, and with ``keep_regions`` the first fit's regions tied as they are); the
-        uncorrected and the corrected fits are judged by :func:`.decision.prediction_cost` on
-        the colours as observed (each coat's reflection added back, one unknown per region's
-        strength and two for the grey coat's shared colour: three with one group). Returns the
-        estimate kept, its hypothesis and the reflection subtracted before it (None: none)."""
+        sun found the first time; with ``keep_regions`` the first fit's regions, tied as they
+        are, are one more hypothesis); the uncorrected and the corrected fits are judged by
+        :func:`.decision.prediction_cost` on the colours as observed (each coat's reflection
+        added back, one unknown per region's strength and two for the grey coat's shared
+        colour: three with one group). Returns the estimate kept, its hypothesis and the
+        reflection subtracted before it (None: none)."""
         c, obs = self.config, prep.obs
         normals = prep.data.mesh.face_normals[obs.face]
         escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
