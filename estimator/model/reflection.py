@@ -1,6 +1,8 @@
 """The reflection matrices of the model R = t_d sum h C + t_s sum h D."""
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from ..core import sh
@@ -22,10 +24,21 @@ def diffuse_matrix(mesh: TriangleMesh, sampling: SphereSampling, visibility: Vis
     Returns
     -------
     (n, (L + 1)^2) float64 (n = F without ``faces``). Computed in chunks of faces
-    (matrix products, no per-face loop).
+    (matrix products, no per-face loop). Every face's rows are kept on ``visibility``
+    (read-only), keyed by the order, the coat and the mesh's normals: a pose refinement asks
+    for them again for each held-out estimate and prediction.
     """
+    if faces is None:
+        key = ("diffuse rows", order, coat_ior, hashlib.blake2b(np.ascontiguousarray(mesh.face_normals)).digest(),
+               hashlib.blake2b(np.ascontiguousarray(sampling.directions)).digest())
+        held = visibility.derived.get(key)
+        if held is None:
+            held = diffuse_matrix(mesh, sampling, visibility, order, np.arange(mesh.num_faces), coat_ior, chunk)
+            held.flags.writeable = False
+            visibility.derived[key] = held
+        return held
     y_weighted = sh.basis(order, sampling.directions) * (sampling.weights / np.pi)[:, None]   # (K, M)
-    faces = np.arange(mesh.num_faces) if faces is None else np.asarray(faces)
+    faces = np.asarray(faces)
     normals = mesh.face_normals
     out = np.empty((len(faces), sh.num_coeffs(order)))
     for start in range(0, len(faces), chunk):

@@ -1,7 +1,7 @@
 """The shadow function: which sample directions are unoccluded from each face."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
@@ -72,6 +72,9 @@ class Visibility:
 
     bits: np.ndarray
     num_directions: int
+    # what is computed from these bits once and read again (the diffuse rows of each held-out
+    # estimate and prediction of a pose refinement), by key; read-only arrays
+    derived: dict = field(default_factory=dict, repr=False, compare=False)
 
     def unpack(self, faces: slice | np.ndarray) -> np.ndarray:
         """(n, K) bool visibility of the given faces."""

@@ -86,3 +86,20 @@ def test_coated_diffuse_rows_weight_the_cosine_by_the_coats_transmission():
     # the models pass the coat through (the defiltered model keeps its gains)
     cfg = EstimatorConfig(sh_order=2, directions=1164)
     np.testing.assert_array_equal(PaperModel(cfg).diffuse_matrix(mesh, sampling, vis, coat_ior=1.5), coated)
+
+
+def test_every_faces_diffuse_rows_are_kept_on_the_shadow_function_read_only():
+    """A pose refinement asks for the same rows once per held-out estimate and prediction: the
+    first call's are kept (read-only) and returned again; another order, coat or mesh gets its own."""
+    import dataclasses
+
+    mesh = sphere(1)
+    sampling = sphere_sampling(300)
+    vis = compute_visibility(RayCaster(mesh), sampling)
+    rows = diffuse_matrix(mesh, sampling, vis, 2)
+    assert diffuse_matrix(mesh, sampling, vis, 2) is rows and not rows.flags.writeable
+    np.testing.assert_allclose(rows[[3, 7]], diffuse_matrix(mesh, sampling, vis, 2, faces=np.array([3, 7])), atol=1e-15)
+    assert diffuse_matrix(mesh, sampling, vis, 1).shape == (mesh.num_faces, 4)
+    assert not np.array_equal(diffuse_matrix(mesh, sampling, vis, 2, coat_ior=1.5), rows)
+    turned = dataclasses.replace(mesh, vertices=mesh.vertices[:, [1, 2, 0]])   # same faces, other normals
+    assert not np.array_equal(diffuse_matrix(turned, sampling, vis, 2), rows)
