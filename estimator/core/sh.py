@@ -17,6 +17,8 @@ with c = sqrt(3 / (4 pi)).
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import special
 
@@ -74,23 +76,35 @@ def basis(order: int, dirs: np.ndarray) -> np.ndarray:
     # the block is transposed into the output: writing the columns of an (N, M) array directly
     # touches N cache lines per coefficient (2.3x slower at order 10)
     scratch = np.empty((m, min(BASIS_BLOCK, n)))
-    scale = [[np.sqrt((2 * l + 1) / (4 * np.pi) * np.exp(special.gammaln(l - mm + 1) - special.gammaln(l + mm + 1)))
-              for l in range(order + 1)] for mm in range(order + 1)]
+    scale, first = _normalisation(order)
     for start in range(0, n, BASIS_BLOCK):
         stop = min(start + BASIS_BLOCK, n)
         block = scratch[:, : stop - start]
-        _basis_rows(order, *(d[start:stop, k].copy() for k in range(3)), scale, block)
+        _basis_rows(order, *(d[start:stop, k].copy() for k in range(3)), scale, first, block)
         out[start:stop] = block.T
     return out
 
 
-def _basis_rows(order: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, scale: list, out: np.ndarray) -> None:
+@functools.lru_cache(maxsize=None)
+def _normalisation(order: int) -> tuple[tuple[tuple[float, ...], ...], tuple[float, ...]]:
+    """``scale[m][l]``, the normalisation of (l, m), and ``first[m]`` = (2m - 1)!!, Q_m^m, for
+    degrees up to ``order``: kept per order (scipy's special functions cost more per call
+    than a block of the recurrence)."""
+    scale = tuple(tuple(float(np.sqrt((2 * l + 1) / (4 * np.pi) * np.exp(special.gammaln(l - m + 1)
+                                                                          - special.gammaln(l + m + 1))))
+                        for l in range(order + 1)) for m in range(order + 1))
+    first = tuple(float(special.factorial2(2 * m - 1, exact=False)) if m else 1.0 for m in range(order + 1))
+    return scale, first
+
+
+def _basis_rows(order: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, scale: tuple, first: tuple,
+                out: np.ndarray) -> None:
     """Fill ``out`` ((L + 1)^2, N) with the basis at directions (x, y, z) (N,) each;
-    ``scale[m][l]`` is the normalisation of (l, m)."""
+    ``scale[m][l]`` is the normalisation of (l, m), ``first[m]`` = (2m - 1)!!."""
     re, im = np.ones_like(x), np.zeros_like(x)   # (x + i y)^m
     for m in range(order + 1):
         # Q_l^m(z) = P_l^m(z) / sin^m(theta) without Condon-Shortley phase.
-        q_prev, q = None, np.full_like(z, special.factorial2(2 * m - 1, exact=False) if m else 1.0)
+        q_prev, q = None, np.full_like(z, first[m])
         for l in range(m, order + 1):
             if l == m + 1:
                 q_prev, q = q, (2 * m + 1) * z * q
