@@ -365,14 +365,16 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
     A view whose correction grows beyond :func:`plausible` goes back to its silhouette-only
     pose, or to its given pose when that too is beyond it (and is marked 'diverged'): it was
     pulled by a poor estimate, not by its pixels. Its 'pixels' and 'cost' then describe the
-    alignment that was thrown away.
+    alignment that was thrown away. Where the views outside a group determine no estimate
+    (``solve`` raises :class:`InputError`: a singular solve from too few views), that group's
+    views keep their poses for the round ('unaligned_rounds' counts such rounds).
 
     Returns
     -------
     data : the data with the refined cameras.
     info : one dict per view: 'name', 'rotation_deg' and 'translation' (world units) of the
-        correction, 'c2w' (4x4 list), 'diverged' (bool), 'pixels' and 'cost' of the last
-        alignment.
+        correction, 'c2w' (4x4 list), 'diverged' (bool), 'unaligned_rounds' (int), 'pixels'
+        and 'cost' of the last alignment.
     """
     n = len(data.views)
     if n < 2:
@@ -397,12 +399,22 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
             log(f"pose refinement: {n} views in {folds} groups leave under {POSE_MIN_VIEWS} views per held-out "
                 "estimate; only the silhouette step ran")
     estimates: list[Estimate | None] = [None] * folds
+    unaligned = [0] * n
     for r in range(rounds):
         for k in range(folds):
             held = [i for i in range(n) if i % folds == k]
-            estimates[k] = solve(dataclasses.replace(data, views=[v for i, v in enumerate(views) if i % folds != k]),
+            try:
+                estimate = solve(dataclasses.replace(data, views=[v for i, v in enumerate(views) if i % folds != k]),
                                  estimates[k] if r > 0 else estimates[k - 1])
-            predictor = Predictor(data.mesh, estimates[k], caster)
+            except InputError as exc:   # the other views do not determine an estimate: this group waits
+                for i in held:
+                    unaligned[i] += 1
+                if log:
+                    log(f"pose refinement round {r + 1}: no estimate from the views outside group {k + 1} ({exc}); "
+                        f"its {len(held)} views keep their poses this round")
+                continue
+            estimates[k] = estimate
+            predictor = Predictor(data.mesh, estimate, caster)
             for i in held:
                 cam, last[i] = refine_view(views[i], predictor)
                 diverged[i] = not plausible(data.views[i].camera, cam, centre)
@@ -411,5 +423,6 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
             moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
             log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg")
     info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), "diverged": bad,
-             **extra} for v, w, bad, extra in zip(data.views, views, diverged, last)]
+             "unaligned_rounds": skipped, **extra}
+            for v, w, bad, skipped, extra in zip(data.views, views, diverged, unaligned, last)]
     return dataclasses.replace(data, views=views), info

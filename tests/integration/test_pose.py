@@ -105,6 +105,44 @@ def test_poses_without_alpha_are_refined_by_held_out_estimates(tiny_earth_data):
     assert np.median(after) < 0.6 * np.median(before) and not any(p["diverged"] for p in info)
 
 
+def test_a_group_whose_held_out_estimate_fails_keeps_its_poses(tiny_earth_data):
+    """Where the views outside a group determine no estimate (a singular solve from too few
+    views), that group's views keep their poses for the round and are counted; the other
+    groups are aligned, and the default's run warns instead of failing."""
+    data = tiny_earth_data.data
+    bad = dataclasses.replace(data, views=[dataclasses.replace(v, alpha=None)
+                                           for v in jittered(data.views, 1.0, 0.02, seed=1)])
+    first = data.views[0].name
+
+    def solve(d, prior):
+        if first not in {v.name for v in d.views}:   # group 1's held-out estimate
+            raise InputError("the solve is singular (a stand-in)")
+        return estimate(d, "bilinear-per-face", EARTH)
+
+    refined, info = refine_poses(bad, solve, rounds=1, folds=4)
+    group = [i for i in range(len(data.views)) if i % 4 == 0]
+    assert [p["unaligned_rounds"] for p in info] == [1 if i in group else 0 for i in range(len(data.views))]
+    for i, (before, after) in enumerate(zip(bad.views, refined.views)):
+        assert np.array_equal(before.camera.c2w, after.camera.c2w) == (i in group)
+
+
+def test_the_run_warns_of_views_left_unaligned(tiny_earth_data, monkeypatch):
+    import estimator.api as api
+
+    data = tiny_earth_data.data
+    first, fit = data.views[0].name, api._fit
+
+    def failing_fit(d, *args, **kwargs):
+        if first not in {v.name for v in d.views}:
+            raise InputError("the solve is singular (a stand-in)")
+        return fit(d, *args, **kwargs)
+
+    monkeypatch.setattr(api, "_fit", failing_fit)
+    est = estimate(data, "bilinear-per-face", dataclasses.replace(EARTH, pose_rounds=1))
+    assert sum(p["unaligned_rounds"] for p in est.info["poses"]) == len(data.views[::4])
+    assert any("were not aligned in some round" in w and "raise pose_folds" in w for w in est.info["warnings"])
+
+
 def test_pixel_hits_lie_on_the_pixel_rays_and_the_hit_faces(tiny_earth_data):
     from estimator.rays.raycast import RayCaster
 
