@@ -404,8 +404,8 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
         for k in range(folds):
             held = [i for i in range(n) if i % folds == k]
             try:
-                estimate = solve(dataclasses.replace(data, views=[v for i, v in enumerate(views) if i % folds != k]),
-                                 estimates[k] if r > 0 else estimates[k - 1])
+                others = dataclasses.replace(data, views=[v for i, v in enumerate(views) if i % folds != k])
+                estimate = solve(others, estimates[k] if r > 0 else estimates[k - 1])
             except InputError as exc:   # the other views do not determine an estimate: this group waits
                 for i in held:
                     unaligned[i] += 1
