@@ -27,12 +27,11 @@ def coat_map_fit(ctx: FitContext) -> coat_map.ReflectedLight:
 
 def through_coat(ctx: FitContext) -> Shading:
     """The diffuse shading through the coat (the cosine weighted by the coat's entry
-    transmission 1 - F, as Mitsuba's ``plastic``), made once per solve."""
-    fits, prep = ctx.fits, ctx.prep
-    if fits.through_coat is None:
-        fits.through_coat = ctx.model.diffuse_matrix(prep.data.mesh, prep.sampling, prep.visibility,
-                                                     coat_ior=ctx.config.coat_ior)
-    return Shading(fits.through_coat, coat_ior=ctx.config.coat_ior)
+    transmission 1 - F, as Mitsuba's ``plastic``); its rows are computed once and kept on the
+    shadow function (:func:`estimator.model.reflection.diffuse_matrix`)."""
+    prep = ctx.prep
+    return Shading(ctx.model.diffuse_matrix(prep.data.mesh, prep.sampling, prep.visibility,
+                                            coat_ior=ctx.config.coat_ior), coat_ior=ctx.config.coat_ior)
 
 
 def coat_map_candidate(ctx: FitContext, regions: bool) -> coat_map.ReflectedLight | None:

@@ -97,13 +97,11 @@ class Hypothesis:
 @dataclass
 class ReflectionFits:
     """The view-dependent fits of one solve, made on first need from the observations before any
-    coat correction: the coat's map, the lobe's light with the lobe rows of every observation,
-    and the shading matrix through the coat (F, M) (it depends on the geometry alone)."""
+    coat correction: the coat's map and the lobe's light with the lobe rows of every observation."""
 
     observations: Observations
     coat_map: ReflectedLight | None = None
     lobe: tuple[LobeLight, np.ndarray] | None = None
-    through_coat: np.ndarray | None = None
 
 
 @dataclass
