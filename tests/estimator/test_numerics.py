@@ -48,6 +48,26 @@ def test_psnr_convention():
     assert psnr_db(0.0, 1.0) == PSNR_CAP_DB == psnr_db(1e-12, 1.0)
 
 
+def test_held_out_scores_clip_to_the_views_display_range():
+    """The PSNR over the view's display range: a prediction right but for a small light's mirror
+    image (0.5 % of the pixels at 100 x the diffuse level: below 0 dB unclipped) errs on those
+    pixels by at most the peak. The relative RMSE, unclipped: a black prediction scores exactly
+    1, one that diverged (1000 x) above 1 (and below 10 dB)."""
+    from estimator.diagnostics.validation import image_scores
+
+    rng = np.random.default_rng(0)
+    actual = rng.uniform(0.1, 1.0, (2000, 3))
+    predicted = actual * (1.0 + 0.01 * rng.standard_normal(actual.shape))
+    actual[:10] *= 100.0
+    assert psnr_db(float(np.mean((actual - predicted) ** 2)), 1.0) < 0.0
+    near = image_scores(actual, predicted)
+    assert near["psnr"] > 25.0 and near["relative_rmse"] < 1.0
+    assert image_scores(actual, np.zeros_like(actual))["relative_rmse"] == pytest.approx(1.0)
+    diverged = image_scores(actual, 1000.0 * predicted)
+    assert diverged["relative_rmse"] > 1.0 and diverged["psnr"] < 10.0
+    assert image_scores(np.zeros((5, 3)), np.ones((5, 3)))["psnr"] is None
+
+
 def test_cross_validation_warns_below_its_floor_and_on_a_diverged_view():
     from estimator import cross_validation_warnings
 
