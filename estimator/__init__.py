@@ -9,7 +9,7 @@ from .api import DEFAULT_METHOD, EXPONENT_CANDIDATES, estimate
 from .config import COMPONENTS, DIFFUSE_LIGHTS, LOSSES, SPECULAR_MODELS, EstimatorConfig
 from .core import camera, latlong, sh
 from .core.atlas import uv_atlas
-from .core.camera import Camera, gl_to_mitsuba, look_at, mitsuba_sensor, mitsuba_to_gl
+from .core.camera import Camera, gl_to_mitsuba, look_at, mitsuba_sensor, mitsuba_to_gl, multijitter_count
 from .core.data import MultiViewData, TriangleMesh, View
 from .core.errors import InputError
 from .core.gauge import unit_dc
@@ -21,7 +21,7 @@ from .diagnostics.validation import cross_validate, cross_validation_warnings, h
 from .methods import REGISTRY, Method, get_method, register_method
 from .model.estimate import Estimate
 from .model.forward import Predictor
-from .model.reflection import diffuse_matrix
+from .model.reflection import diffuse_matrix, fresnel_dielectric
 from .model.reflection_models import MitsubaMaterial, NoMitsubaEquivalent, reflection_model
 from .pipeline.pose import outline_offsets, reprojection_error
 from .rays import backend
@@ -47,6 +47,7 @@ __all__ = [
     "VARIANTS",
     "axis_angle_matrix",
     "diffuse_matrix",
+    "fresnel_dielectric",
     "fibonacci_sphere",
     "Camera",
     "Estimate",
@@ -75,6 +76,7 @@ __all__ = [
     "look_at",
     "mitsuba_mesh",
     "mitsuba_sensor",
+    "multijitter_count",
     "mitsuba_to_gl",
     "outline_offsets",
     "prediction_scores",

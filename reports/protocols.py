@@ -139,7 +139,7 @@ def lpips_unavailable() -> str | None:
         import lpips  # noqa: F401
         import torch
     except ImportError as exc:
-        return f"LPIPS unavailable: {exc.name} is not installed (pip install .[lpips])"
+        return f"LPIPS unavailable: {exc.name} is not installed (pip install -e \".[lpips]\")"
     weights = os.path.join(torch.hub.get_dir(), "checkpoints")
     if not (os.path.isdir(weights) and any(f.startswith("vgg16") for f in os.listdir(weights))):
         return (f"LPIPS unavailable: torchvision's VGG16 weights are not in {weights} (it downloads them on "

@@ -13,6 +13,7 @@ with its centre at (i + 0.5, j + 0.5); row 0 is the top of the image.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -152,10 +153,18 @@ class Camera:
         return np.stack([x, y], axis=1), depth
 
 
+def multijitter_count(spp: int) -> int:
+    """The samples per pixel Mitsuba's ``multijitter`` sampler takes for ``spp``: a grid of
+    floor(sqrt(spp)) columns and as many rows as cover ``spp`` (it rounds any other count up
+    itself, with a warning on the console; 32 becomes 35)."""
+    columns = max(1, math.isqrt(int(spp)))
+    return columns * -(-int(spp) // columns)
+
+
 def mitsuba_sensor(mi, camera: "Camera", spp: int) -> dict:
     """The Mitsuba ``perspective`` sensor dict of ``camera`` (square pixels), with an RGBA
-    ``hdrfilm`` (box filter) and a ``multijitter`` sampler of ``spp`` samples; ``mi`` is the
-    mitsuba module with a variant set."""
+    ``hdrfilm`` (box filter) and a ``multijitter`` sampler of :func:`multijitter_count`
+    (``spp``) samples; ``mi`` is the mitsuba module with a variant set."""
     if abs(camera.fx - camera.fy) > 1e-6 * camera.fx:
         raise InputError("rendering needs square pixels (fl_x == fl_y)")
     return {
@@ -169,5 +178,5 @@ def mitsuba_sensor(mi, camera: "Camera", spp: int) -> dict:
         "to_world": mi.ScalarTransform4f(gl_to_mitsuba(camera.c2w)),
         "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
                  "pixel_format": "rgba", "rfilter": {"type": "box"}},
-        "sampler": {"type": "multijitter", "sample_count": int(spp)},
+        "sampler": {"type": "multijitter", "sample_count": multijitter_count(spp)},
     }

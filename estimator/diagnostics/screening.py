@@ -1,7 +1,12 @@
 """Faces whose albedo the observations do not determine: found after the solve, marked
 unestimated with a reason, and never reported as a number.
 
-Four reasons, each a property of the data or of physics, none fitted to a scene:
+Five reasons, each a property of the data or of physics, none fitted to a scene:
+
+* ``left out by the method``: the face has observations in kept views, but the method gave
+  it no albedo (``bilinear-clustered`` leaves out faces darker in every view than
+  ``min_brightness`` times the bright faces', as in a point light's shadow). Counted so that
+  the warning states every face without an estimate that a view shows.
 
 * ``non-finite``: the solve gave NaN or infinity.
 * ``beyond physical range``: a channel of the albedo is negative, or exceeds
@@ -28,7 +33,8 @@ from ..model.estimate import Estimate
 DARKEST_ALBEDO = 0.01                  # black velvet, carbon black: the darkest real reflectances
 MAX_ALBEDO_RATIO = 1.0 / DARKEST_ALBEDO
 MAX_RELATIVE_SE = 1.0
-REASONS = ("non-finite", "beyond physical range", "undetermined", "contradicted by its observations")
+REASONS = ("non-finite", "beyond physical range", "undetermined", "contradicted by its observations",
+           "left out by the method")
 
 
 def out_of_range(est: Estimate) -> np.ndarray:

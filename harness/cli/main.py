@@ -559,7 +559,7 @@ def cmd_import(args) -> int:
         arrays = read_uv_textures(ds.data.mesh, args.mesh, args.diffuse, args.specular, args.envmap)
     est = imported_estimate(arrays, f, f"{args.source}: {', '.join(os.path.abspath(p) for p in files)}",
                             _positive_float("--exponent", args.exponent))
-    for warning in import_warnings(arrays):
+    for warning in import_warnings(arrays, (ds.meta.get("estimator_defaults") or {}).get("components", "both")):
         _err(f"warning: {warning}")
     write_run(args.output, est, args.dataset, overwrite=args.overwrite, extra={"scene": ds.meta.get("scene")},
               fingerprint=fingerprint(ds.data), inputs=[*ds.inputs, *files])

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from estimator import InputError, NoMitsubaEquivalent, Predictor, axis_angle_matrix
+from estimator import InputError, NoMitsubaEquivalent, Predictor, axis_angle_matrix, multijitter_count
 from harness.io.atomic import atomic_directory, check_output
 from harness.io.dataset import fingerprint, read_dataset
 from harness.io.jsonio import dump_json, load_json
@@ -114,8 +114,8 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
     if mitsuba:
         spp = cross_check_spp or (512 if est.model.light == "radiance" else 64)
         try:
-            log(f"rendering the estimate through Mitsuba ({spp} spp, as two independent halves)")
-            half = max(1, spp // 2)   # two seeds: their difference measures the render's own noise
+            half = multijitter_count(max(1, spp // 2))   # two seeds: their difference measures the render's noise
+            log(f"rendering the estimate through Mitsuba ({2 * half} spp, as two independent halves)")
             renders.estimate = render_estimate(mesh, est, cams, half, seed=7)
             renders.estimate_twin = render_estimate(mesh, est, cams, half, seed=8)
         except NoMitsubaEquivalent as exc:

@@ -19,7 +19,7 @@ import zipfile
 
 import numpy as np
 
-from estimator import Estimate, EstimatorConfig, InputError, TriangleMesh, sh
+from estimator import Estimate, EstimatorConfig, InputError, TriangleMesh, fresnel_dielectric, sh
 from harness.io.images import read_linear_rgb
 from harness.io.mesh import load_mesh_with_uv
 
@@ -178,6 +178,7 @@ def read_uv_textures(mesh: TriangleMesh, mesh_path: str, diffuse_path: str, spec
 DIFFUSE_PROPERTY = {"diffuse": "reflectance", "plastic": "diffuse_reflectance",
                     "roughplastic": "diffuse_reflectance", "principled": "base_color"}
 MIRRORS = ("conductor", "roughconductor")
+COATED = ("plastic", "roughplastic")
 
 
 def xml_referenced_files(path: str) -> list[str]:
@@ -197,8 +198,9 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
     """Per-face albedos and the radiance SH of a Mitsuba 3 scene XML, for the dataset's ``mesh``.
 
     The scene's first ``ply``/``obj`` shape with a BSDF is read (its ``to_world`` matrix
-    applied): ``diffuse``, ``plastic``, ``roughplastic`` (diffuse albedo only; the coat is
-    not a per-face albedo) or ``principled`` (``base_color``), inside ``twosided`` or as a
+    applied): ``diffuse``, ``plastic``, ``roughplastic`` (the specular albedo the coat's
+    Fresnel reflectance at normal incidence times its ``specular_reflectance``, the ground
+    truth's convention) or ``principled`` (``base_color``), inside ``twosided`` or as a
     ``blendbsdf`` of constant ``weight`` w whose first child contributes (1 - w) x its
     albedo and second w x its albedo (a ``conductor``/``roughconductor`` child is the
     specular albedo: its ``specular_reflectance``). Albedos are ``bitmap`` textures (relative
@@ -243,13 +245,15 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
     check_overlap(mesh, textured, os.path.join(folder, filename))
     bsdf = child_bsdf(shape)
     parts = {"diffuse": np.zeros((mesh.num_faces, 3)), "specular": np.zeros((mesh.num_faces, 3))}
+    from_bitmap = set()   # the parts a bitmap feeds (a constant part is one colour by right)
 
-    def albedo(element, name, default):
-        """(F, 3) per-face values of property ``name`` of ``element``."""
+    def albedo(element, name, default, part):
+        """(F, 3) per-face values of property ``name`` of ``element``, which feed ``part``."""
         for child in element:
             if child.get("name") != name:
                 continue
             if child.tag == "texture" and child.get("type") == "bitmap":
+                from_bitmap.add(part)
                 raw = child.find("boolean[@name='raw']")
                 nearest = child.find("string[@name='filter_type']")
                 return _texture_faces(
@@ -266,6 +270,19 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
                              "only bitmap textures and rgb/float values are read")
         return np.full((mesh.num_faces, 3), default)
 
+    def coat_ior(element) -> float:
+        """A plastic's relative index int_ior / ext_ior (Mitsuba's defaults 1.49 and air's,
+        taken as 1 as the ground truth does), given as numbers."""
+        values = []
+        for name, default in (("int_ior", 1.49), ("ext_ior", 1.0)):
+            if element.find(f"string[@name='{name}']") is not None:
+                raise InputError(f"{path}: {element.get('type')}.{name} is a material name; give it as a <float>")
+            found = element.find(f"float[@name='{name}']")
+            values.append(default if found is None else float(_xml_floats(found, path, 1)[0]))
+        if not (values[0] > 0 and values[1] > 0 and values[0] != values[1]):
+            raise InputError(f"{path}: {element.get('type')} needs int_ior and ext_ior > 0 and unequal, got {values}")
+        return values[0] / values[1]
+
     def add(element, weight):
         kind = element.get("type")
         if kind == "twosided":
@@ -279,15 +296,18 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
             add(children[0], weight * (1.0 - w))
             return add(children[1], weight * w)
         if kind in DIFFUSE_PROPERTY:
-            parts["diffuse"] += weight * albedo(element, DIFFUSE_PROPERTY[kind], 0.5)
+            parts["diffuse"] += weight * albedo(element, DIFFUSE_PROPERTY[kind], 0.5, "diffuse")
+            if kind in COATED:   # the coat's reflectance at normal incidence, as the ground truth records it
+                parts["specular"] += weight * float(fresnel_dielectric(1.0, coat_ior(element))) * albedo(
+                    element, "specular_reflectance", 1.0, "specular")
         elif kind in MIRRORS:
-            parts["specular"] += weight * albedo(element, "specular_reflectance", 1.0)
+            parts["specular"] += weight * albedo(element, "specular_reflectance", 1.0, "specular")
         else:
             raise InputError(f"{path}: BSDF type {kind!r} is not read; use diffuse, plastic, roughplastic, principled, "
                              "or a blendbsdf of those with a conductor")
 
     add(bsdf, 1.0)
-    out = {**parts, "radiance_sh": None, "pseudo_sh": None}
+    out = {**parts, "radiance_sh": None, "pseudo_sh": None, "textured": sorted(from_bitmap)}
     for emitter in root.findall("emitter"):
         if emitter.get("type") == "envmap":
             radiance = _envmap_sh(os.path.join(folder, _xml_value(emitter, "string", "filename", path)), order)
@@ -343,12 +363,15 @@ def _xml_matrix(element, path: str) -> np.ndarray | None:
     return _xml_floats(children[0], path, 16).reshape(4, 4)
 
 
-def import_warnings(arrays: dict) -> list[str]:
+def import_warnings(arrays: dict, components: str = "both") -> list[str]:
     """What an import may have read wrong, one line each: an albedo black or of one colour on
-    every face (an empty or unread texture), and no light at all (the estimate then holds a
-    constant one, which the reports compare as if it were the method's)."""
+    every face (an empty or unread texture; a component the dataset's ``components`` leaves
+    out, 'diffuse' or 'specular', is black by right, and where ``arrays['textured']`` names the
+    parts a texture fed, the others are constants by right), and no light at all (the estimate then
+    holds a constant one, which the reports compare as if it were the method's)."""
     out = []
-    for name in ("diffuse", "specular"):
+    checked = {"diffuse": ("diffuse",), "specular": ("specular",)}.get(components, ("diffuse", "specular"))
+    for name in [n for n in checked if n in arrays.get("textured", checked)]:
         values = arrays.get(name)
         if values is None:
             continue
@@ -403,10 +426,13 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
     if np.any(dc <= 0):
         raise InputError(f"{source}: the light's mean (DC) must be positive per channel, got {dc}")
     observed = np.isfinite(diffuse).all(axis=1)
-    info = {"imported_from": source, "clusters": int(num_faces)}
+    # an imported result carries no grouping of its own: faces of identical albedos are one group
+    labels = np.full(num_faces, -1, dtype=np.int64)
+    labels[observed] = np.unique(np.hstack([diffuse, specular])[observed], axis=0, return_inverse=True)[1].ravel()
+    info = {"imported_from": source, "clusters": int(labels.max() + 1)}
     with np.errstate(over="ignore", invalid="ignore"):
         finite = all(np.all(np.isfinite(a)) for a in (diffuse * dc, specular * dc, pseudo / dc))
     if not finite:
         raise InputError(f"{source}: the albedos times the light's DC overflow (values too large)")
-    return Estimate(diffuse * dc, specular * dc, pseudo / dc, np.where(observed, np.arange(num_faces), -1),
-                    observed, f"imported-{source.split(':')[0]}", config, info)
+    return Estimate(diffuse * dc, specular * dc, pseudo / dc, labels, observed, f"imported-{source.split(':')[0]}",
+                    config, info)

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from estimator import Camera, RayCaster, TriangleMesh, backend
+from estimator import Camera, RayCaster, TriangleMesh, backend, fresnel_dielectric
 from harness.io.atomic import atomic_directory
 from harness.io.dataset import write_dataset, write_ground_truth
 from harness.io.images import read_linear_rgb
@@ -124,11 +124,6 @@ def material_dict(m, regions: np.ndarray | None = None) -> dict:
     return out
 
 
-def fresnel_normal(ior: float) -> float:
-    """Fresnel reflectance of a dielectric at normal incidence, ((n - 1) / (n + 1))^2."""
-    return ((ior - 1.0) / (ior + 1.0)) ** 2
-
-
 def prepare(spec: SceneSpec) -> GeneratedScene:
     """Geometry, materials and illumination of a spec (no rendering).
 
@@ -142,7 +137,7 @@ def prepare(spec: SceneSpec) -> GeneratedScene:
     for faces, part in ([(regions == k, m.region_material(r)) for k, r in enumerate(m.regions)] if m.mixed
                         else [(slice(None), m)]):
         if part.model in ("plastic", "roughplastic"):
-            specular[faces] = fresnel_normal(part.int_ior)
+            specular[faces] = float(fresnel_dielectric(1.0, part.int_ior))   # ((n - 1) / (n + 1))^2
         elif part.model == "diffuse":
             specular[faces] = 0.0
     return GeneratedScene(spec, mesh, diffuse, specular, regions, build_illumination(spec.illumination, spec.seed))

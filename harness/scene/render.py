@@ -14,6 +14,7 @@ from estimator import (
     look_at,
     mitsuba_mesh,
     mitsuba_sensor,
+    multijitter_count,
 )
 from harness import plugins
 from harness.io.lens import Lens, undistort
@@ -187,7 +188,8 @@ def build_scene(mesh: TriangleMesh, diffuse: np.ndarray, specular: np.ndarray, m
 
 
 def render_views(scene, cameras: list[Camera], spp: int, seed: int = 0, desc: str = "render") -> list[np.ndarray]:
-    """Render each camera (same intrinsics as the scene's sensor) -> list of (H, W, 4) float32 RGBA.
+    """Render each camera (same intrinsics as the scene's sensor) -> list of (H, W, 4) float32 RGBA,
+    at :func:`estimator.multijitter_count` (``spp``) samples per pixel.
 
     The sensor pose is updated in place, so Dr.Jit compiles the kernel once.
     """
@@ -201,7 +203,7 @@ def render_views(scene, cameras: list[Camera], spp: int, seed: int = 0, desc: st
             raise ValueError(f"camera {index} is {cam.width}x{cam.height}, the film is {size[0]}x{size[1]}")
         params["sensor.to_world"] = mi.ScalarTransform4f(gl_to_mitsuba(cam.c2w))
         params.update()
-        image = mi.render(scene, spp=spp, seed=(seed * 100003 + index) % 2 ** 32)
+        image = mi.render(scene, spp=multijitter_count(spp), seed=(seed * 100003 + index) % 2 ** 32)
         images.append(np.array(image, dtype=np.float32))
     return images
 

@@ -45,3 +45,15 @@ def test_bad_cameras_are_refused():
         camera.Camera(np.eye(4), -1, 1, 0, 0, 4, 4)
     with pytest.raises(ValueError, match="fov"):
         camera.Camera.from_fov(np.eye(4), 190, 4, 4)
+
+
+@pytest.mark.parametrize("spp", [1, 2, 3, 5, 16, 32, 50, 64, 100, 256, 512])
+def test_multijitter_count_is_taken_as_it_is(spp):
+    """Mitsuba's multijitter sampler keeps the count we give (it rounds any other up, with a
+    console warning: 32 became 35), and that count covers the one asked for."""
+    from estimator.rays import backend
+
+    mi = backend.set_variant()
+    count = camera.multijitter_count(spp)
+    assert spp <= count < spp + 2 * np.sqrt(spp) + 1
+    assert mi.load_dict({"type": "multijitter", "sample_count": count}).sample_count() == count

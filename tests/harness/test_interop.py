@@ -41,12 +41,15 @@ def _report(run, out):
     return json.load(open(os.path.join(out, "metrics.json")))
 
 
-def test_per_face_import_scores_at_ratio_one(tiny_earth, tmp_path):
+def test_per_face_import_scores_at_ratio_one(tiny_earth, tmp_path, capsys):
+    """The truth imported per face scores at ratio one, and without a warning: earth-specular's
+    data are specular only (its estimator's ``components``), so a black diffuse is right."""
     ds = read_dataset(tiny_earth)
     truth = ds.ground_truth
     np.savez(tmp_path / "faces.npz", diffuse=truth.diffuse, specular=truth.specular, radiance_sh=truth.radiance_sh)
     assert main(["import", tiny_earth, "--from", "per-face", "--file", str(tmp_path / "faces.npz"),
                  "--exponent", "10", "-o", str(tmp_path / "run")]) == 0
+    assert not np.any(truth.diffuse) and "warning" not in capsys.readouterr().err
     est, meta = read_run(str(tmp_path / "run"))
     assert est.method == "imported-per-face" and "faces.npz" in meta["imported_from"]
     m = _report(tmp_path / "run", tmp_path / "report")
@@ -178,16 +181,21 @@ def test_mitsuba_export_renders_the_dataset_in_stock_mitsuba(stock_export, tmp_p
     np.testing.assert_allclose(stock[..., :3][both].mean(0), view.rgb[both].mean(0), rtol=0.02)
 
 
-def test_mitsuba_xml_import_round_trip(stock_export, tmp_path):
+def test_mitsuba_xml_import_round_trip(stock_export, tmp_path, capsys):
     """The exported frame XML imported back: the true albedos exactly (nearest-filtered atlas
-    on a PLY) and the true light (its envmap turned by to_world)."""
+    on a PLY; the plastic's specular its coat's Fresnel reflectance at normal incidence, as the
+    ground truth records it), the true light (its envmap turned by to_world) and the true
+    regions (faces of one albedo are one group), without a warning."""
     folder, out = stock_export
     assert main(["import", str(folder), "--from", "mitsuba-xml", "--file", str(out / "test_000.xml"),
                  "-o", str(tmp_path / "run")]) == 0
+    assert "warning" not in capsys.readouterr().err
     m = _report(tmp_path / "run", tmp_path / "report")
-    diffuse = m["albedo"]["diffuse"]["lstsq"]["luminance"]
-    assert diffuse["median_ratio"] == pytest.approx(1.0, abs=1e-6) and diffuse["within_5"] == 1.0
+    for part in ("diffuse", "specular"):
+        scores = m["albedo"][part]["lstsq"]["luminance"]
+        assert scores["median_ratio"] == pytest.approx(1.0, abs=1e-6) and scores["within_5"] == 1.0
     assert m["illumination"]["relative_l2"] < 1e-6
+    assert m["clusters"]["ari"] == pytest.approx(1.0)
 
 
 def test_estimate_export_imports_back(stock_export, tmp_path):
@@ -221,6 +229,12 @@ def test_mitsuba_export_refuses_a_phong_dataset(tiny_earth, tmp_path, capsys):
      "no <shape type='ply'|'obj'> with a BSDF"),
     ("<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/>"
      "<bsdf type='dielectric'/></shape></scene>", "BSDF type 'dielectric' is not read"),
+    ("<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/>"
+     "<bsdf type='plastic'><string name='int_ior' value='bk7'/></bsdf></shape></scene>",
+     "plastic.int_ior is a material name; give it as a <float>"),
+    ("<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/>"
+     "<bsdf type='roughplastic'><float name='int_ior' value='1.0'/></bsdf></shape></scene>",
+     "roughplastic needs int_ior and ext_ior > 0 and unequal"),
     ("<sensor/>", "not a Mitsuba <scene>"),
     ("<scene", "not a readable XML file"),
     ("<scene version='3.0.0'><shape type='ply'><string name='filename' value='object.ply'/>"

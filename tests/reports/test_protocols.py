@@ -99,7 +99,7 @@ def test_lpips_is_stated_unavailable_with_its_reason(monkeypatch):
     pred, ref, mask = _scene()
     out = protocols.score(["v"], [pred], [ref], [mask], ("stanford-orb",))["stanford-orb"]
     assert out["lpips_vgg"] is None and out["per_view"][0]["lpips_vgg"] is None
-    assert out["unavailable"] == ["LPIPS unavailable: lpips is not installed (pip install .[lpips])"]
+    assert out["unavailable"] == ["LPIPS unavailable: lpips is not installed (pip install -e \".[lpips]\")"]
     assert out["higher_is_better"]["lpips_vgg"] is False and np.isfinite(out["psnr_h"])
 
 

@@ -176,7 +176,8 @@ class RetinexSegmented(Method):
                                 [0] + [len(np.unique(group)) + 2] * len(candidates))
         best = int(np.argmin(costs))
         named = {"none": float(costs[0]), **{f"degree {r.order}": float(x) for (r, _), x in zip(candidates, costs[1:])}}
-        self.log(f"coat's reflection: costs {named}, {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
+        costs_text = ", ".join(f"{name} {cost:.1f}" for name, cost in named.items())
+        self.log(f"coat's reflection: costs {costs_text}; {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
         applied = None
         if best:
             (est, chosen), applied = fitted[best - 1], candidates[best - 1][0]
