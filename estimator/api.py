@@ -142,8 +142,7 @@ def _screen(prep: Prepared, est: Estimate, fitted: bool) -> dict[str, int]:
     (:mod:`estimator.diagnostics.screening`). ``fitted``: the method fits the reflection
     model to the observations, so each albedo's standard error under it is its own (a method
     that fits nothing is judged by range only). Returns the count of faces set aside per reason."""
-    left_out = prep.obs.observed_faces() & ~est.observed   # seen in a kept view, given no albedo
-    counts = screening.mark_unestimated(est, np.where(left_out, np.int8(len(screening.REASONS)), 0).astype(np.int8))
+    counts = screening.mark_unestimated(est, screening.left_out(est, prep.obs.observed_faces()))
     counts.update(screening.mark_unestimated(est, screening.out_of_range(est)))
     if not est.observed.any():
         raise InputError("no face has a finite albedo within the physical range: the observations do not "

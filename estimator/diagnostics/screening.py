@@ -3,11 +3,6 @@ unestimated with a reason, and never reported as a number.
 
 Five reasons, each a property of the data or of physics, none fitted to a scene:
 
-* ``left out by the method``: the face has observations in kept views, but the method gave
-  it no albedo (``bilinear-clustered`` leaves out faces darker in every view than
-  ``min_brightness`` times the bright faces', as in a point light's shadow). Counted so that
-  the warning states every face without an estimate that a view shows.
-
 * ``non-finite``: the solve gave NaN or infinity.
 * ``beyond physical range``: a channel of the albedo is negative, or exceeds
   :data:`MAX_ALBEDO_RATIO` times that channel's median over the estimated faces where it is
@@ -23,6 +18,10 @@ Five reasons, each a property of the data or of physics, none fitted to a scene:
   it has observations, and every one of them is an outlier under the estimate: its own data
   reject the albedo its region gave it (a face joined to a region by its neighbours, whose
   colour is another region's).
+* ``left out by the method``: the face has observations in kept views, but the method gave
+  it no albedo (``bilinear-clustered`` leaves out faces darker in every view than
+  ``min_brightness`` times the bright faces', as in a point light's shadow). Counted so that
+  the warning states every face without an estimate that a view shows.
 """
 from __future__ import annotations
 
@@ -35,6 +34,12 @@ MAX_ALBEDO_RATIO = 1.0 / DARKEST_ALBEDO
 MAX_RELATIVE_SE = 1.0
 REASONS = ("non-finite", "beyond physical range", "undetermined", "contradicted by its observations",
            "left out by the method")
+
+
+def left_out(est: Estimate, seen: np.ndarray) -> np.ndarray:
+    """(F,) int8 reason code of the faces a kept view shows (``seen`` (F,) bool) that the
+    method gave no albedo."""
+    return np.where(seen & ~est.observed, REASONS.index("left out by the method") + 1, 0).astype(np.int8)
 
 
 def out_of_range(est: Estimate) -> np.ndarray:
