@@ -15,6 +15,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from estimator import backend  # noqa: E402
+from harness.cli.heap import keep_freed_memory  # noqa: E402
 
 
 def bare_ray_test(caster, sampling, repeats: int = 5) -> tuple[int, float]:
@@ -39,6 +40,7 @@ def bare_ray_test(caster, sampling, repeats: int = 5) -> tuple[int, float]:
 
 
 def main() -> None:
+    keep_freed_memory()   # the heap the command line runs with
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--dataset", default=os.path.join(ROOT, "out", "bench", "earth-specular"))
     p.add_argument("--profile", help="scene profile when the dataset must be generated")

@@ -33,6 +33,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import numpy as np  # noqa: E402
 
 from estimator import estimate  # noqa: E402
+from harness.cli.heap import keep_freed_memory  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
 from harness.scene.generate import generate  # noqa: E402
@@ -48,6 +49,7 @@ def psnr_of(albedo, truth, mask, component: str = "diffuse") -> float:
 
 
 def main() -> None:
+    keep_freed_memory()   # the heap the command line runs with
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="out/bench-real-light")
     p.add_argument("--cases", default="real-light-diffuse-lab-0,real-light-plastic-studio-0,"

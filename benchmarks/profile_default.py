@@ -20,6 +20,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from estimator import estimate  # noqa: E402
+from harness.cli.heap import keep_freed_memory  # noqa: E402
 from harness.io.dataset import read_dataset  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
 
@@ -27,6 +28,7 @@ SHOWN = ("estimator/", "linalg", "sparse/_base.py")   # the project's functions 
 
 
 def main() -> None:
+    keep_freed_memory()   # the heap the command line runs with
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("datasets", nargs="+")
     p.add_argument("--method", help="a registered method (default: the dataset's)")

@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from estimator import VARIANTS, InputError, StopRequested, clear_stop, request_stop
+from harness.cli.heap import keep_freed_memory
 from harness.io.atomic import OutputError, check_output, refuse_inputs
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
@@ -799,6 +800,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     _SIGTERM_SEEN[0] = False
     clear_stop()
+    keep_freed_memory()
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)

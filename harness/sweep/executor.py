@@ -12,6 +12,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterator
 
 from estimator import InputError
+from harness.cli.heap import keep_freed_memory
 
 EXECUTORS = ("local", "dask")
 BLAS_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -36,7 +37,8 @@ def _exit_with_parent(parent: int) -> None:
 
 def _init_worker(parent: int, devices) -> None:
     """Pool initializer: watch the parent; with ``devices`` (a queue), take the next free
-    CUDA device (before Dr.Jit starts)."""
+    CUDA device (before Dr.Jit starts); keep freed memory for reuse, as the command line does."""
+    keep_freed_memory()
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
     if devices is not None:
         os.environ["CUDA_VISIBLE_DEVICES"] = str(devices.get())
