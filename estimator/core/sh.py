@@ -85,6 +85,40 @@ def basis(order: int, dirs: np.ndarray) -> np.ndarray:
     return out
 
 
+def evaluate(order: int, dirs: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+    """The functions with SH coefficients ``coeffs`` at unit directions: ``basis(order, dirs)
+    @ coeffs``, block by block, without the (N, (L + 1)^2) basis (at order 10 it is 121
+    values per direction, written and read again for a few products).
+
+    Parameters
+    ----------
+    order : int, maximum degree L.
+    dirs : (N, 3) unit vectors.
+    coeffs : ((L + 1)^2, C) coefficients of C functions.
+
+    Returns
+    -------
+    (N, C) float64.
+    """
+    d = np.asarray(dirs, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3:
+        raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
+    m = num_coeffs(order)
+    coeffs = np.asarray(coeffs, dtype=np.float64)
+    if coeffs.ndim != 2 or coeffs.shape[0] != m:
+        raise InputError(f"coeffs must have shape ({m}, C) for order {order}, got {coeffs.shape}")
+    n = d.shape[0]
+    out = np.empty((n, coeffs.shape[1]))
+    scratch = np.empty((m, min(BASIS_BLOCK, n)))
+    scale, first = _normalisation(order)
+    for start in range(0, n, BASIS_BLOCK):
+        stop = min(start + BASIS_BLOCK, n)
+        block = scratch[:, : stop - start]
+        _basis_rows(order, *(d[start:stop, k].copy() for k in range(3)), scale, first, block)
+        out[start:stop] = block.T @ coeffs
+    return out
+
+
 @functools.lru_cache(maxsize=None)
 def _normalisation(order: int) -> tuple[tuple[tuple[float, ...], ...], tuple[float, ...]]:
     """``scale[m][l]``, the normalisation of (l, m), and ``first[m]`` = (2m - 1)!!, Q_m^m, for

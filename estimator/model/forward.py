@@ -58,9 +58,9 @@ class Predictor:
         hit = np.nonzero(face >= 0)[0]
         f = face[hit]
         mirror = mirror_directions(self.mesh.face_normals[f], -dirs[hit])
-        d_rows = self.model.specular_rows(f, mirror, self.sampling, self.visibility)
         light = self.light(rotation)
-        value = self.model.predict(est.diffuse[f], est.specular[f], (self.c_matrix @ light)[f], d_rows @ light)
+        value = self.model.predict(est.diffuse[f], est.specular[f], (self.c_matrix @ light)[f],
+                                   self.model.specular_shading(f, mirror, self.sampling, self.visibility, light))
         rgb = np.zeros((camera.height * camera.width, 3), dtype=np.float32)
         rgb[hit] = value
         coverage = (face >= 0).astype(np.float32)

@@ -23,7 +23,7 @@ from ..core import sh
 from ..core.data import TriangleMesh
 from ..core.settings import Section
 from ..rays.visibility import SphereSampling, Visibility
-from .reflection import diffuse_matrix, lobe_matrix, mirror_matrix
+from .reflection import diffuse_matrix, lobe_matrix, mirror_matrix, mirror_shadow
 
 LIGHTS = ("pseudo", "radiance")
 
@@ -119,6 +119,12 @@ class ReflectionModel(ABC):
                       visibility: Visibility) -> np.ndarray:
         """(N, M) specular rows D_k for faces (N,) seen along mirrored view directions (N, 3)."""
 
+    def specular_shading(self, faces: np.ndarray, mirror: np.ndarray, sampling: SphereSampling,
+                         visibility: Visibility, light: np.ndarray) -> np.ndarray:
+        """(N, C) D_k . x of faces (N,) seen along mirrored view directions (N, 3) under the
+        light unknown ``light`` (M, C): :meth:`specular_rows` @ ``light``."""
+        return self.specular_rows(faces, mirror, sampling, visibility) @ light
+
     def pseudo_from_light(self, light: np.ndarray) -> np.ndarray:
         """The pseudo illumination h (M, C) from the light unknown (M, C)."""
         return light
@@ -154,6 +160,10 @@ class PaperModel(ReflectionModel):
 
     def specular_rows(self, faces, mirror, sampling, visibility):
         return mirror_matrix(faces, mirror, sampling, visibility, self.order)
+
+    def specular_shading(self, faces, mirror, sampling, visibility, light):
+        # h(r) s(r), the light evaluated at the mirror directions without the (N, M) rows
+        return sh.evaluate(self.order, mirror, light) * mirror_shadow(faces, mirror, sampling, visibility)[:, None]
 
     def mitsuba_material(self):
         return MitsubaMaterial("diffuse_mirror", {})

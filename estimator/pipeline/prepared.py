@@ -110,9 +110,7 @@ class Prepared:
         """(n, M) specular rows D_k of the kept observations ``rows`` (n,) (indices into ``obs``)."""
         if not self.streamed:
             return self.d_rows[rows]
-        face = self.obs.face[rows]
-        mirror = mirror_directions(self.data.mesh.face_normals[face], self.obs.view_dir[rows])
-        return self.model.specular_rows(face, mirror, self.sampling, self.visibility)
+        return self.model.specular_rows(*self._mirrored(rows), self.sampling, self.visibility)
 
     def shading(self, light: np.ndarray, coat_ior: float | None = None) -> np.ndarray:
         """(F, C) C_i . x of every face under the light unknown ``light`` (M, C); with
@@ -126,7 +124,16 @@ class Prepared:
         """(N, C) D_k . x of every kept observation under the light unknown ``light`` (M, C)."""
         if not self.streamed:
             return self.d_rows @ light
-        return self._projection("gloss", light, len(self.obs.face), lambda part: self.specular_rows(part) @ light)
+        return self._projection("gloss", light, len(self.obs.face), lambda part: self._gloss_rows(part, light))
+
+    def _gloss_rows(self, rows: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """(n, C) D_k . x of the kept observations ``rows`` (n,) of a streamed problem."""
+        return self.model.specular_shading(*self._mirrored(rows), self.sampling, self.visibility, light)
+
+    def _mirrored(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(face (n,), mirrored view direction (n, 3)) of the kept observations ``rows`` (n,)."""
+        face = self.obs.face[rows]
+        return face, mirror_directions(self.data.mesh.face_normals[face], self.obs.view_dir[rows])
 
     def _projection(self, kind, light: np.ndarray, count: int, rows_times_light) -> np.ndarray:
         """A streamed projection, in chunks of :data:`ROW_CHUNK` rows; the last light's is kept

@@ -1,6 +1,7 @@
 """The shadow function: which sample directions are unoccluded from each face."""
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,12 +48,74 @@ class SphereSampling:
     weights: np.ndarray
 
     def nearest(self, dirs: np.ndarray) -> np.ndarray:
-        """(N,) index of the sample direction nearest to each of ``dirs`` (N, 3)."""
-        return cKDTree(self.directions).query(np.asarray(dirs, dtype=np.float64))[1]
+        """(N,) index of the sample direction nearest to each of ``dirs`` (N, 3), by
+        :func:`nearest_candidates` (exact; 3-4x faster than a k-d tree query, which every
+        specular row and predicted pixel makes)."""
+        dirs = np.asarray(dirs, dtype=np.float64)
+        candidates = self._candidates
+        if candidates is None:   # directions that do not surround the origin
+            return cKDTree(self.directions).query(dirs)[1]
+        rows, cols = candidates.shape[:2]
+        theta = np.arccos(np.clip(dirs[:, 2] / np.maximum(np.linalg.norm(dirs, axis=1), 1e-300), -1.0, 1.0))
+        phi = np.arctan2(dirs[:, 1], dirs[:, 0])
+        row = np.minimum((theta * (rows / np.pi)).astype(np.int64), rows - 1)
+        col = np.minimum(((phi + np.pi) * (cols / (2 * np.pi))).astype(np.int64), cols - 1)
+        near = candidates[row, col]                                                    # (N, K)
+        cosine = sum(self.directions[:, k][near] * dirs[:, k, None] for k in range(3))
+        return near[np.arange(len(near)), np.argmax(cosine, axis=1)]
+
+    @functools.cached_property
+    def _candidates(self) -> np.ndarray | None:
+        return nearest_candidates(self.directions)
 
 
+def nearest_candidates(directions: np.ndarray) -> np.ndarray | None:
+    """(rows, cols, K) int: for each cell of a latitude-longitude grid (polar axis +Z), the
+    sample directions (K, 3) one of which is nearest to any point of the cell, padded by
+    repeating the last; None when the directions do not surround the origin.
+
+    Every point of the sphere lies within the covering radius R of some sample: R is the
+    largest angular radius of the circles through the convex hull's facets (the hull of
+    points on a sphere is their spherical Delaunay triangulation, each point lies in the cap
+    of the facet its radius crosses, and no point of a triangle is further than its
+    circumradius from all of its corners). A cell whose corners lie within rho of its centre
+    therefore keeps the samples within rho + R of that centre. Cells of half the samples'
+    mean spacing keep about 8 samples each.
+    """
+    hull = ConvexHull(directions)
+    plane = -hull.equations[:, 3]            # each facet's plane: normal . x = plane, unit normals
+    if np.any(plane <= 1e-9):
+        return None
+    cover = float(np.arccos(np.clip(plane.min(), -1.0, 1.0)))
+    spacing = np.sqrt(4.0 * np.pi / len(directions))
+    rows = max(int(np.ceil(2.0 * np.pi / spacing)), 4)
+    cols = 2 * rows
+    theta = np.linspace(0.0, np.pi, rows + 1)
+    phi = np.linspace(-np.pi, np.pi, cols + 1)
+
+    def unit(t, p):
+        return np.stack(np.broadcast_arrays(np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)), axis=-1)
+
+    t_mid, p_mid = 0.5 * (theta[:-1] + theta[1:]), 0.5 * (phi[:-1] + phi[1:])
+    centre = unit(t_mid[:, None], p_mid[None, :])                                     # (rows, cols, 3)
+    # the farthest point of a cell from its centre is a corner (distance grows along each edge)
+    corners = [unit(t[:, None], p[None, :]) for t in (theta[:-1], theta[1:]) for p in (phi[:-1], phi[1:])]
+    rho = np.max([np.arccos(np.clip(np.sum(c * centre, axis=-1), -1.0, 1.0)) for c in corners], axis=0)
+    reach = np.minimum(rho + cover + 1e-9, np.pi).ravel()
+    found = cKDTree(directions).query_ball_point(centre.reshape(-1, 3), 2.0 * np.sin(reach / 2.0))
+    counts = np.array([len(f) for f in found])
+    width = int(counts.max())
+    flat = np.concatenate([np.asarray(f, dtype=np.int64) for f in found])
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    slot = np.minimum(np.arange(width)[None, :], counts[:, None] - 1)                # repeat the last one
+    return flat[starts[:, None] + slot].reshape(rows, cols, width)
+
+
+@functools.lru_cache(maxsize=8)
 def sphere_sampling(count: int = 1164) -> SphereSampling:
-    """``count`` golden-spiral directions, weighted by their convex-hull triangulation.
+    """``count`` golden-spiral directions, weighted by their convex-hull triangulation (one
+    read-only sampling per count, shared by every estimate and prediction of a process, with
+    its nearest-direction lookup).
 
     The paper uses 1164 directions (2324 hull triangles).
     """
@@ -62,7 +125,9 @@ def sphere_sampling(count: int = 1164) -> SphereSampling:
     areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     weights = np.zeros(count)
     np.add.at(weights, tris.ravel(), np.repeat(areas / 3.0, 3))
-    return SphereSampling(dirs, weights * (4.0 * np.pi / weights.sum()))
+    weights *= 4.0 * np.pi / weights.sum()
+    dirs.flags.writeable = weights.flags.writeable = False
+    return SphereSampling(dirs, weights)
 
 
 @dataclass(frozen=True)

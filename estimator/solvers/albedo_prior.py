@@ -81,7 +81,8 @@ def smooth_albedo(albedo: np.ndarray, precision: np.ndarray, edges: np.ndarray, 
             continue   # zero on most faces: no texture level to judge differences by
         # in units of the channel's level, so that every size below is of order one
         a = out[:, c] / level
-        p = np.where(estimated, np.minimum(np.nan_to_num(precision[:, c] * level ** 2, posinf=cap), cap), 0.0)
+        with np.errstate(over="ignore"):   # a precision beyond the cap is the cap
+            p = np.where(estimated, np.minimum(np.nan_to_num(precision[:, c] * level ** 2, posinf=cap), cap), 0.0)
         with np.errstate(divide="ignore"):
             variance = np.where(p > 0, 1.0 / p, np.inf)
         noise = float(np.median(variance[i] + variance[j]))

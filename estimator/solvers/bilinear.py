@@ -108,6 +108,20 @@ def _component_rows(components: str, c_rows: np.ndarray, d_rows: np.ndarray) -> 
     return {"both": [c_rows, d_rows], "specular": [d_rows], "diffuse": [c_rows]}[components]
 
 
+def _light_step(r: np.ndarray, group: np.ndarray, albedos: list[np.ndarray], component_rows: list[np.ndarray],
+                ridge: float) -> np.ndarray:
+    """(M,) one channel's light with the albedos fixed: least squares of r (N,) on the rows
+    sum_p albedos[p][group] component_rows[p] (each (G,) and (N, M)), with a Tikhonov weight
+    ``ridge`` relative to the mean diagonal."""
+    rows = albedos[0][group, None] * component_rows[0]
+    for a, x in zip(albedos[1:], component_rows[1:]):
+        rows += a[group, None] * x
+    gram = rows.T @ rows
+    m = gram.shape[0]
+    gram[np.diag_indices(m)] += ridge * np.trace(gram) / m
+    return np.linalg.solve(gram, rows.T @ r)
+
+
 def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterations, tol, residuals, norm,
                 schedule=LM_SCHEDULE):
     """Levenberg-Marquardt on one channel, albedos eliminated by their Schur complement.
@@ -143,11 +157,16 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
         g_alb = np.stack([np.bincount(group, feats[:, i] * e, minlength=num_groups) for i in range(p)], -1)
         # w[g, q] = sum over group g of feats_q jac = sum_i alb[g, i] (sum of feats_q rows_i):
         # sparse products with the fixed rows, not with a scaled copy of the Jacobian
-        w = np.zeros((num_groups, p, m))
+        w = np.empty((num_groups, p, m))
         for q in range(p):
             members.data = feats[order, q]
             for i in range(p):
-                w[:, q] += alb[:, i, None] * (members @ rows[i])
+                summed = members @ rows[i]
+                summed *= alb[:, i, None]
+                if i == 0:
+                    w[:, q] = summed
+                else:
+                    w[:, q] += summed
         v = jac.T @ jac
         g_h = jac.T @ e
         while True:
@@ -207,8 +226,8 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
     ridge : Tikhonov weight of the ALS light step, relative to the mean diagonal.
     als_iterations : ALS steps before Levenberg-Marquardt.
     schedule : Levenberg-Marquardt damping (start, raise, lower, max).
-    initial_light : (M, 3) start of the light (a previous solve's): one ALS step replaces
-        ``als_iterations`` before Levenberg-Marquardt.
+    initial_light : (M, 3) start of the light (a previous solve's): Levenberg-Marquardt
+        starts from it and the albedos fitted to it, without ALS steps.
 
     Returns
     -------
@@ -227,7 +246,6 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
         if initial_light.shape != (m, 3):
             raise InputError(f"solve_bilinear: initial_light must be ({m}, 3), got {initial_light.shape}")
         h = np.array(initial_light, dtype=np.float64)
-        als_iterations = 1
     td, ts = np.zeros((num_groups, 3)), np.zeros((num_groups, 3))
     norm = max(float(np.linalg.norm(rgb)), 1e-300)
     residuals: list[float] = []
@@ -239,16 +257,15 @@ def solve_bilinear(rgb: np.ndarray, group: np.ndarray, c_rows: np.ndarray, d_row
     # the unknown albedos (views of td and ts, filled in place) and the rows each multiplies
     albedos = {"both": (td, ts), "specular": (ts,), "diffuse": (td,)}[components]
     component_rows = _component_rows(components, c_rows, d_rows)
-    for _ in range(1 if fixed_light is not None else als_iterations):
+    # a given light (fixed, or a previous solve's start) needs only the albedos fitted to it
+    light_steps = als_iterations if fixed_light is None and initial_light is None else 0
+    for step in range(max(light_steps, 1)):
         for ch in range(3):
             td[:, ch], ts[:, ch] = _solve_albedos(rgb[:, ch], c_rows @ h[:, ch], d_rows @ h[:, ch],
                                                   group, num_groups, components)
-        if fixed_light is None:
+        if step < light_steps:
             for ch in range(3):
-                rows = sum(a[group, ch, None] * x for a, x in zip(albedos, component_rows))
-                gram = rows.T @ rows
-                gram[np.diag_indices(m)] += ridge * np.trace(gram) / m
-                h[:, ch] = np.linalg.solve(gram, rows.T @ rgb[:, ch])
+                h[:, ch] = _light_step(rgb[:, ch], group, [a[:, ch] for a in albedos], component_rows, ridge)
         residuals.append(relative_residual())
     if fixed_light is None and iterations > 0:
         lm_residuals = [[] for _ in range(3)]

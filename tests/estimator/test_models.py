@@ -69,6 +69,14 @@ def test_rows_of_the_three_models_agree_where_they_should():
     td, ts = np.full((5, 3), 0.3), np.full((5, 3), 0.2)
     np.testing.assert_allclose(PaperModel.predict(td, ts, c_paper[faces] @ light, d_rows @ light),
                                td * (c_paper[faces] @ light) + ts * (d_rows @ light))
+    # each model's specular shading is its rows times the light (the paper's without the rows)
+    rng = np.random.default_rng(2)
+    faces = rng.integers(0, mesh.num_faces, 300)
+    view = rng.standard_normal((300, 3))
+    mirror = mirror_directions(mesh.face_normals[faces], view / np.linalg.norm(view, axis=1, keepdims=True))
+    for model in (PaperModel(cfg), DefilteredModel(cfg), LobeModel(cfg)):
+        np.testing.assert_allclose(model.specular_shading(faces, mirror, sampling, vis, light),
+                                   model.specular_rows(faces, mirror, sampling, vis) @ light, rtol=0, atol=1e-12)
 
 
 def test_coated_diffuse_rows_weight_the_cosine_by_the_coats_transmission():

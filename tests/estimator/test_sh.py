@@ -3,6 +3,7 @@ import pytest
 from scipy import integrate, special
 
 from estimator.core import latlong, sh
+from estimator.core.errors import InputError
 
 
 def test_basis_matches_scipy_complex_sph_harm():
@@ -24,6 +25,18 @@ def test_basis_in_blocks_equals_the_basis_of_each_direction_alone():
     rows = [0, sh.BASIS_BLOCK - 1, sh.BASIS_BLOCK, len(d) - 1]
     np.testing.assert_allclose(y[rows], np.concatenate([sh.basis(6, d[[k]]) for k in rows]), atol=1e-14)
     assert sh.basis(3, np.zeros((0, 3))).shape == (0, 16)
+
+
+def test_evaluate_is_the_basis_times_the_coefficients_without_the_basis():
+    # across a block seam, several functions at once; shapes are checked
+    d = sh.fibonacci_sphere(sh.BASIS_BLOCK + 37)
+    coeffs = np.random.default_rng(0).standard_normal((49, 3))
+    np.testing.assert_allclose(sh.evaluate(6, d, coeffs), sh.basis(6, d) @ coeffs, rtol=0, atol=1e-12)
+    assert sh.evaluate(6, np.zeros((0, 3)), coeffs).shape == (0, 3)
+    with pytest.raises(InputError, match=r"coeffs must have shape \(49, C\)"):
+        sh.evaluate(6, d, coeffs[:16])
+    with pytest.raises(InputError, match="dirs must have shape"):
+        sh.evaluate(6, d[:, :2], coeffs)
 
 
 def test_order_one_sign_convention():

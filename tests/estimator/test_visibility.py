@@ -21,6 +21,32 @@ def test_paper_sphere_sampling():
     assert np.abs(integral[1:]).max() < 5e-3  # 0.15 % of the DC integral (measured 0.004)
 
 
+@pytest.mark.parametrize("count", [12, 301, 1164, 5000])
+def test_nearest_direction_is_exact(count):
+    # the grid lookup against a k-d tree: random directions, not normalised, the samples
+    # themselves, the poles and the seam at phi = +-pi
+    from scipy.spatial import cKDTree
+
+    s = sphere_sampling(count)
+    rng = np.random.default_rng(count)
+    seam = np.stack([np.cos(np.linspace(-1.5, 1.5, 50)), np.full(50, -1e-12), np.sin(np.linspace(-1.5, 1.5, 50))], 1)
+    d = np.concatenate([rng.standard_normal((20000, 3)) * rng.uniform(0.1, 10.0, (20000, 1)), s.directions,
+                        [[0, 0, 1], [0, 0, -1], [0, 1e-9, 1], [-1, 0, 0]], seam])
+    np.testing.assert_array_equal(s.nearest(d), cKDTree(s.directions).query(d)[1])
+
+
+def test_nearest_direction_of_samples_that_leave_a_hemisphere_empty():
+    # directions that do not surround the origin have no covering radius: the k-d tree answers
+    from estimator.rays.visibility import SphereSampling, nearest_candidates
+
+    upper = sphere_sampling(400).directions
+    upper = upper[upper[:, 2] > 0.1]
+    assert nearest_candidates(upper) is None
+    s = SphereSampling(upper, np.ones(len(upper)))
+    d = np.random.default_rng(0).standard_normal((500, 3))
+    assert np.all(np.sum(upper[s.nearest(d)] * d, axis=1) >= (d @ upper.T).max(axis=1) - 1e-12)
+
+
 def test_convex_sphere_sees_its_whole_upper_hemisphere():
     mesh = sphere(2)
     s = sphere_sampling(300)
