@@ -41,7 +41,9 @@ POSE_STEPS = 10          # Gauss-Newton steps per level
 POSE_MAX_DEGREES = 10.0  # a correction beyond this turn, or beyond POSE_MAX_SHIFT x the distance to
 POSE_MAX_SHIFT = 0.25    # the mesh, is a divergence (against a poor estimate), not a calibration error
 POSE_MIN_GAIN = 1e-4     # a level stops when a step lowers the cost by less than this share,
-POSE_MIN_MOVE = 0.01     # or moves no point by more than this many pixels (far below what a pose is judged at)
+POSE_MIN_MOVE = 0.01     # or moves no point by more than this share of the level's Gaussian sigma: a blurred level
+                         # places points to a fraction of its sigma only (0.01 px at the finest, far below what a
+                         # pose is judged at)
 POSE_MIN_VIEWS = 3       # a held-out estimate from fewer views is too poor to align with
 POSE_LEVEL_POINTS = 10   # a blurred level with fewer sampled points is skipped
 # points sampled per level at most: six unknowns are pinned by a few thousand pixels (the
@@ -159,11 +161,14 @@ def _blur(image: np.ndarray, sigma: float) -> tuple[np.ndarray, int]:
 
 
 def _align(observed: np.ndarray, factor: int, template: np.ndarray, points_world: np.ndarray, camera: Camera,
-           steps: int, free: np.ndarray, fallback: Camera | None = None) -> tuple[Camera, float, float]:
+           steps: int, free: np.ndarray, fallback: Camera | None = None,
+           min_move: float = POSE_MIN_MOVE) -> tuple[Camera, float, float]:
     """Damped Gauss-Newton alignment at one level of the parameters where ``free`` (6,) bool
     is set, from ``camera`` or from ``fallback`` when that fits this level better (so the
     result never fits worse than either); ``observed`` is the level's image at 1/``factor``
-    of the camera's resolution (:func:`_blur`). Returns (camera, cost before, cost after)."""
+    of the camera's resolution (:func:`_blur`). It stops after ``steps`` steps, or when a step
+    lowers the cost by less than :data:`POSE_MIN_GAIN` or moves no point by more than
+    ``min_move`` pixels. Returns (camera, cost before, cost after)."""
     grad_row, grad_col = np.gradient(observed, axis=(0, 1))
     gradients = np.concatenate([grad_col, grad_row], axis=2) / factor   # (H', W', 2C) per camera pixel
     channels = observed.shape[2]
@@ -218,7 +223,7 @@ def _align(observed: np.ndarray, factor: int, template: np.ndarray, points_world
             damping *= 10.0
         else:
             break
-        if gain < POSE_MIN_GAIN or moved < POSE_MIN_MOVE:
+        if gain < POSE_MIN_GAIN or moved < min_move:
             break
     return cam, first, current
 
@@ -258,7 +263,7 @@ def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales:
         template = _sample(blurred, (np.stack([cols[covered], rows[covered]], axis=1) + 0.5) / factor)
         finest = k == len(scales) - 1   # the result must fit at least as well as the given pose
         cam, before, after = _align(*_blur(seen, sigma), template, surface[covered], cam, steps, free,
-                                    view.camera if finest else None)
+                                    view.camera if finest else None, POSE_MIN_MOVE * sigma)
         info["pixels"], info["cost"] = int(len(covered)), [before, after]
     return cam, info
 
