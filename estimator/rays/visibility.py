@@ -49,8 +49,8 @@ class SphereSampling:
 
     def nearest(self, dirs: np.ndarray) -> np.ndarray:
         """(N,) index of the sample direction nearest to each of ``dirs`` (N, 3), by
-        :func:`nearest_candidates` (exact; 3-4x faster than a k-d tree query, which every
-        specular row and predicted pixel makes)."""
+        :func:`nearest_candidates` (exact; 2.4x faster than a k-d tree query at the paper's
+        1164 directions, and every specular row and predicted pixel makes one)."""
         dirs = np.asarray(dirs, dtype=np.float64)
         candidates = self._candidates
         if candidates is None:   # directions that do not surround the origin
@@ -80,7 +80,7 @@ def nearest_candidates(directions: np.ndarray) -> np.ndarray | None:
     of the facet its radius crosses, and no point of a triangle is further than its
     circumradius from all of its corners). A cell whose corners lie within rho of its centre
     therefore keeps the samples within rho + R of that centre. Cells of half the samples'
-    mean spacing keep about 8 samples each.
+    mean spacing keep a handful (at most 6 of the paper's 1164 directions).
     """
     hull = ConvexHull(directions)
     plane = -hull.equations[:, 3]            # each facet's plane: normal . x = plane, unit normals

@@ -157,16 +157,11 @@ def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterat
         g_alb = np.stack([np.bincount(group, feats[:, i] * e, minlength=num_groups) for i in range(p)], -1)
         # w[g, q] = sum over group g of feats_q jac = sum_i alb[g, i] (sum of feats_q rows_i):
         # sparse products with the fixed rows, not with a scaled copy of the Jacobian
-        w = np.empty((num_groups, p, m))
+        w = np.zeros((num_groups, p, m))
         for q in range(p):
             members.data = feats[order, q]
             for i in range(p):
-                summed = members @ rows[i]
-                summed *= alb[:, i, None]
-                if i == 0:
-                    w[:, q] = summed
-                else:
-                    w[:, q] += summed
+                w[:, q] += alb[:, i, None] * (members @ rows[i])
         v = jac.T @ jac
         g_h = jac.T @ e
         while True:
