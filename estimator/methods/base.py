@@ -154,11 +154,13 @@ class Method(ABC):
         """Every observed face its own group. A streamed problem (:attr:`Prepared.streamed`)
         is solved in two steps of bounded memory: the light from the observations of
         ``config.light_faces`` observed faces drawn at random (seed 0), then every face's
-        albedos with that light fixed, on the rows' projections onto it."""
+        albedos with that light fixed, on the rows' projections onto it. A light given
+        (``fixed_light``) is used the same way: the robust rounds weigh (N, 3) projections
+        instead of (N, M) rows."""
         group, observed, g = _per_face_groups(prep)
         info = {"clusters": g}
-        if not prep.streamed:
-            return self._from_groups(prep, group, self._solve_groups(prep, group, g, fixed_light), observed, info)
+        if fixed_light is None and not prep.streamed:
+            return self._from_groups(prep, group, self._solve_groups(prep, group, g), observed, info)
         light = fixed_light
         if light is None:
             seen = np.nonzero(observed)[0]

@@ -38,10 +38,9 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     free = np.nonzero(group < 0)[0]
     group[free] = regions + np.arange(len(free))
     groups = f if regions == 0 else regions + len(free)
-    if prep.streamed:   # on the rows' projections onto the light (O(N) memory)
-        result = method._solve_groups(prep.projected(light), group, groups, np.eye(3))
-    else:
-        result = method._solve_groups(prep, group, groups, light)
+    # on the rows' projections onto the light: O(N) memory, and each robust round weighs
+    # (N, 3) projections instead of (N, M) rows
+    result = method._solve_groups(prep.projected(light), group, groups, np.eye(3))
     specular = np.zeros((f, 3))
     reference = result.specular[:regions] if regions else result.specular[group[h.lit]]
     specular[:] = np.median(reference, axis=0) if len(reference) else 0.0
