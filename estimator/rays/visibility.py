@@ -52,6 +52,8 @@ class SphereSampling:
         :func:`nearest_candidates` (exact; 2.4x faster than a k-d tree query at the paper's
         1164 directions, and every specular row and predicted pixel makes one)."""
         dirs = np.asarray(dirs, dtype=np.float64)
+        if not np.all(np.isfinite(dirs)):
+            raise InputError("nearest sample direction: the directions must be finite")
         candidates = self._candidates
         if candidates is None:   # directions that do not surround the origin
             return cKDTree(self.directions).query(dirs)[1]

@@ -3,6 +3,7 @@ import pytest
 
 from estimator.core import sh
 from estimator.core.data import TriangleMesh
+from estimator.core.errors import InputError
 from estimator.model.reflection import diffuse_matrix, lobe_matrix, mirror_matrix
 from estimator.rays.raycast import RayCaster
 from estimator.rays.visibility import compute_visibility, shadow_function, sphere_sampling
@@ -33,6 +34,8 @@ def test_nearest_direction_is_exact(count):
     d = np.concatenate([rng.standard_normal((20000, 3)) * rng.uniform(0.1, 10.0, (20000, 1)), s.directions,
                         [[0, 0, 1], [0, 0, -1], [0, 1e-9, 1], [-1, 0, 0]], seam])
     np.testing.assert_array_equal(s.nearest(d), cKDTree(s.directions).query(d)[1])
+    with pytest.raises(InputError, match="must be finite"):
+        s.nearest(np.array([[np.nan, 0.0, 1.0]]))
 
 
 def test_nearest_direction_of_samples_that_leave_a_hemisphere_empty():
