@@ -52,6 +52,8 @@ class ImageSet:
             # the render's noise adds in quadrature to the disagreement of the two models
             view["render_noise"] = noise
             view["relative_l2_noise_free"] = float(np.sqrt(max(view["relative_l2"] ** 2 - noise ** 2, 0.0)))
+        if self.noise is not None and per_view:
+            out["relative_l2_noise_free"] = float(np.mean([v["relative_l2_noise_free"] for v in out["per_view"]]))
         if self.protocols and per_view:
             out["protocols"] = protocols.score(self.names, self.predictions, self.references, self.masks,
                                                self.protocols)

@@ -25,7 +25,9 @@ TRACKED: dict[str, tuple[str, float]] = {
     "novel_views.psnr_srgb": ("higher", 0.5),
     "novel_views.ssim_srgb": ("higher", 0.01),
     "relighting.psnr_srgb": ("higher", 0.5),
-    "mitsuba_cross_check.relative_l2": ("lower", 0.005),
+    # the two models' disagreement with the render's own Monte Carlo noise taken out: the
+    # noisy figure moves with any change of the sampler (a sample count) and not the models
+    "mitsuba_cross_check.relative_l2_noise_free": ("lower", 0.005),
 }
 
 

@@ -55,10 +55,10 @@ def test_baseline_regression_exit_codes(tiny_report, capsys):
                  "--baseline", str(base)]) == 0
     # a metric the baseline tracks but the report lacks counts as a regression
     assert main(["report", str(run), "-o", str(tiny_report / "skip"), "--no-mitsuba", "--baseline", str(base)]) == 1
-    assert "mitsuba_cross_check.relative_l2" in capsys.readouterr().err
+    assert "mitsuba_cross_check.relative_l2_noise_free" in capsys.readouterr().err
     worse = json.load(open(base))
     worse["metrics"]["albedo.specular.dc.luminance.within_10"] = 1.5  # impossible to reach
-    worse["metrics"].pop("mitsuba_cross_check.relative_l2", None)
+    worse["metrics"].pop("mitsuba_cross_check.relative_l2_noise_free", None)
     json.dump(worse, open(tiny_report / "worse.json", "w"))
     capsys.readouterr()
     assert main(["report", str(run), "-o", str(tiny_report / "third"), "--no-mitsuba", "--protocol", "raw",
