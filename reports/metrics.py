@@ -167,9 +167,12 @@ def psnr(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: 
 def ssim(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
     """Mean SSIM (Wang et al. 2004: Gaussian window sigma 1.5, K1 0.01, K2 0.03, population
     covariance) per channel, by scikit-image's ``structural_similarity``; the SSIM map is
-    averaged over the masked pixels (H, W)."""
+    averaged over the masked pixels (H, W). Outside the mask the prediction takes the
+    reference's values, so that a window straddling the mask's edge (the background, a face
+    the estimate left out) compares the masked pixels alone."""
     from skimage.metrics import structural_similarity
 
+    prediction = np.where(mask[..., None], prediction, reference)
     _, full = structural_similarity(prediction.astype(np.float64), reference.astype(np.float64),
                                     data_range=peak, channel_axis=2, gaussian_weights=True, sigma=1.5,
                                     use_sample_covariance=False, full=True)

@@ -51,6 +51,21 @@ def test_psnr_and_ssim_values():
     assert 0.0 < metrics.ssim(noisy, ref, m, 1.0) < 1.0
 
 
+def test_ssim_compares_the_masked_pixels_alone():
+    # a textured reference; the prediction equals it on the mask and is black in a hole the
+    # mask leaves out (a face the estimate did not estimate): the hole's edge must not count
+    rng = np.random.default_rng(3)
+    ref = rng.uniform(0.2, 0.8, (40, 40, 3))
+    mask = np.ones((40, 40), bool)
+    mask[15:25, 15:25] = False
+    pred = np.where(mask[..., None], ref, 0.0)
+    assert metrics.ssim(pred, ref, mask, 1.0) == pytest.approx(1.0)
+    # a difference inside the mask still counts
+    worse = pred.copy()
+    worse[2:8, 2:8] += 0.3
+    assert metrics.ssim(worse, ref, mask, 1.0) < 0.99
+
+
 def test_sh_comparison_and_pseudo_illumination_gauge():
     rng = np.random.default_rng(2)
     radiance = rng.normal(size=(169, 3))
