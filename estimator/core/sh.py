@@ -67,21 +67,10 @@ def basis(order: int, dirs: np.ndarray) -> np.ndarray:
     -------
     (N, (L + 1)^2) float64.
     """
-    d = np.asarray(dirs, dtype=np.float64)
-    if d.ndim != 2 or d.shape[1] != 3:
-        raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
-    n, m = d.shape[0], num_coeffs(order)
-    out = np.empty((n, m))
-    # each coefficient is written as a contiguous row of a (coefficients, block) scratch, then
-    # the block is transposed into the output: writing the columns of an (N, M) array directly
-    # touches N cache lines per coefficient (2.3x slower at order 10)
-    scratch = np.empty((m, min(BASIS_BLOCK, n)))
-    scale, first = _normalisation(order)
-    for start in range(0, n, BASIS_BLOCK):
-        stop = min(start + BASIS_BLOCK, n)
-        block = scratch[:, : stop - start]
-        _basis_rows(order, *(d[start:stop, k].copy() for k in range(3)), scale, first, block)
-        out[start:stop] = block.T
+    d = _directions(dirs)
+    out = np.empty((len(d), num_coeffs(order)))
+    for rows, block in _blocks(order, d):
+        out[rows] = block.T
     return out
 
 
@@ -100,23 +89,40 @@ def evaluate(order: int, dirs: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
     -------
     (N, C) float64.
     """
-    d = np.asarray(dirs, dtype=np.float64)
-    if d.ndim != 2 or d.shape[1] != 3:
-        raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
+    d = _directions(dirs)
     m = num_coeffs(order)
     coeffs = np.asarray(coeffs, dtype=np.float64)
     if coeffs.ndim != 2 or coeffs.shape[0] != m:
         raise InputError(f"coeffs must have shape ({m}, C) for order {order}, got {coeffs.shape}")
-    n = d.shape[0]
-    out = np.empty((n, coeffs.shape[1]))
-    scratch = np.empty((m, min(BASIS_BLOCK, n)))
+    out = np.empty((len(d), coeffs.shape[1]))
+    for rows, block in _blocks(order, d):
+        out[rows] = block.T @ coeffs
+    return out
+
+
+def _directions(dirs: np.ndarray) -> np.ndarray:
+    """``dirs`` as an (N, 3) float64 array, or an InputError naming its shape."""
+    d = np.asarray(dirs, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3:
+        raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
+    return d
+
+
+def _blocks(order: int, d: np.ndarray):
+    """Yield (slice of rows, ((L + 1)^2, B) basis of those directions) over blocks of up to
+    :data:`BASIS_BLOCK` directions of ``d`` (N, 3); the block is one scratch array, refilled.
+
+    Each coefficient is written as a contiguous row of the (coefficients, block) scratch, which
+    the caller transposes or multiplies: writing the columns of an (N, M) array directly touches
+    N cache lines per coefficient (2.3x slower at order 10)."""
+    n = len(d)
+    scratch = np.empty((num_coeffs(order), min(BASIS_BLOCK, n)))
     scale, first = _normalisation(order)
     for start in range(0, n, BASIS_BLOCK):
         stop = min(start + BASIS_BLOCK, n)
         block = scratch[:, : stop - start]
         _basis_rows(order, *(d[start:stop, k].copy() for k in range(3)), scale, first, block)
-        out[start:stop] = block.T @ coeffs
-    return out
+        yield slice(start, stop), block
 
 
 @functools.lru_cache(maxsize=None)
