@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 from ..model.estimate import Estimate
 from ..pipeline.exposure import view_gains
 from ..pipeline.prepared import Prepared
-from ..solvers.robust import relative_residuals, robust_scale
+from ..solvers.robust import exposure_level, relative_residuals, robust_scale
 
 OUTLIER_SIGMAS = 3.0        # a row is an outlier beyond this many robust scales
 MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-free data)
@@ -118,6 +118,30 @@ def reflected_rows(prep: Prepared, labels: np.ndarray, residual: np.ndarray, rel
     return found & same_sign & (relative[first] > threshold)
 
 
+def shadow_edge_rows(prep: Prepared, est: Estimate, rows: np.ndarray) -> np.ndarray:
+    """Which of the given rows the shadow on their reflection explains rather than a fault of their view.
+
+    The model shades a face's reflection by its visibility along the mirror direction alone,
+    a yes-or-no stand-in for the visibility across the reflection's lobe. Where a shadow's
+    edge crosses the lobe, the true reflection lies anywhere between none and the unshadowed
+    one, and the error shows in the one view whose mirror direction falls there: the rows of
+    other views nearest in mirror direction lie on other faces with other shadows, so the
+    mirror test (:func:`reflected_rows`) cannot vouch for it. A row counts as explained when
+    its colour is within ``GROSS_RESIDUAL`` of the exposure level of one of the two bounds:
+    the diffuse term alone, or the diffuse term plus the unshadowed reflection.
+
+    rows : (R,) int indices into the observations. Returns (R,) bool.
+    """
+    obs = prep.obs
+    face = obs.face[rows]
+    diffuse = est.diffuse[face] * prep.shading(est.light)[face]
+    unshadowed = diffuse + est.specular[face] * prep.unshadowed_gloss(rows, est.light)
+    level = exposure_level(obs.rgb)
+    nearest = np.minimum(np.linalg.norm(obs.rgb[rows] - diffuse, axis=1),
+                         np.linalg.norm(obs.rgb[rows] - unshadowed, axis=1)) / level
+    return nearest <= GROSS_RESIDUAL
+
+
 def _add_neighbour_shares(views: list[dict], prep: Prepared) -> None:
     """Give each view's summary ``neighbour_gross_share``: the median gross-error share of the
     NEIGHBOUR_VIEWS views nearest to it in direction from the object's centre. A model misfit
@@ -161,6 +185,8 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     fault = gross.copy()
     fault[gross_rows[reflected_rows(prep, est.labels, residual, relative, estimated, gross_rows,
                                     OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE))]] = False
+    fault_rows = np.nonzero(fault)[0]
+    fault[fault_rows[shadow_edge_rows(prep, est, fault_rows)]] = False
     views = []
     view = _row_views(obs)
     # each view's exposure relative to the others (geometric mean over channels), a figure: a

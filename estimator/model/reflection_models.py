@@ -125,6 +125,12 @@ class ReflectionModel(ABC):
         light unknown ``light`` (M, C): :meth:`specular_rows` @ ``light``."""
         return self.specular_rows(faces, mirror, sampling, visibility) @ light
 
+    def unshadowed_specular_shading(self, mirror: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """(N, C) the reflection of the light unknown ``light`` (M, C) along mirrored view
+        directions (N, 3) with nothing in the way: the pseudo illumination at the mirror
+        directions, h(r). :meth:`specular_shading` is this times a shadow term."""
+        return sh.evaluate(self.order, mirror, self.pseudo_from_light(light))
+
     def pseudo_from_light(self, light: np.ndarray) -> np.ndarray:
         """The pseudo illumination h (M, C) from the light unknown (M, C)."""
         return light

@@ -126,6 +126,11 @@ class Prepared:
             return self.d_rows @ light
         return self._projection("gloss", light, len(self.obs.face), lambda part: self._gloss_rows(part, light))
 
+    def unshadowed_gloss(self, rows: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """(n, C) the reflection of the light unknown ``light`` (M, C) in the kept observations
+        ``rows`` (n,) with no shadow on it (:meth:`ReflectionModel.unshadowed_specular_shading`)."""
+        return self.model.unshadowed_specular_shading(self._mirrored(rows)[1], light)
+
     def _gloss_rows(self, rows: np.ndarray, light: np.ndarray) -> np.ndarray:
         """(n, C) D_k . x of the kept observations ``rows`` (n,) of a streamed problem."""
         return self.model.specular_shading(*self._mirrored(rows), self.sampling, self.visibility, light)

@@ -72,8 +72,14 @@ def relative_residuals(rgb: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     percentile of the rows' colour norms (the exposure level): one yardstick for every face,
     so a face that is dark in most views (unlit, or specular-only off its highlight) is not
     judged by its own tiny level."""
+    return np.linalg.norm(rgb - predicted, axis=1) / exposure_level(rgb)
+
+
+def exposure_level(rgb: np.ndarray) -> float:
+    """The 90th percentile of the colour norms of the rows rgb (N, 3) (1 without rows; at
+    least 1e-300): the yardstick of :func:`relative_residuals`."""
     level = float(np.percentile(np.linalg.norm(rgb, axis=1), 90)) if len(rgb) else 1.0
-    return np.linalg.norm(rgb - predicted, axis=1) / max(level, 1e-300)
+    return max(level, 1e-300)
 
 
 def robust_scale(residuals: np.ndarray, weights: np.ndarray | None = None, floor: float = 1e-3) -> float:

@@ -111,3 +111,25 @@ def test_every_faces_diffuse_rows_are_kept_on_the_shadow_function_read_only():
     assert not np.array_equal(diffuse_matrix(mesh, sampling, vis, 2, coat_ior=1.5), rows)
     turned = dataclasses.replace(mesh, vertices=mesh.vertices[:, [1, 2, 0]])   # same faces, other normals
     assert not np.array_equal(diffuse_matrix(turned, sampling, vis, 2), rows)
+
+
+@pytest.mark.parametrize("flags", [{}, {"diffuse_light": "defiltered"}])
+def test_unshadowed_reflection_is_the_reflection_with_every_direction_visible(flags):
+    """The pseudo models' reflection is h(r) times the visibility along r: with every
+    direction visible it is h(r) itself; with none, zero."""
+    from estimator.rays.visibility import Visibility
+
+    model = reflection_model(EstimatorConfig(sh_order=4, **flags))
+    sampling = sphere_sampling(162)
+    rng = np.random.default_rng(1)
+    mirror = rng.standard_normal((50, 3))
+    mirror /= np.linalg.norm(mirror, axis=1, keepdims=True)
+    light = rng.standard_normal((25, 3))
+    faces = np.zeros(50, dtype=np.int64)
+    nbytes = (sampling.directions.shape[0] + 7) // 8
+    seen = Visibility(np.full((1, nbytes), 255, np.uint8), sampling.directions.shape[0])
+    hidden = Visibility(np.zeros((1, nbytes), np.uint8), sampling.directions.shape[0])
+    unshadowed = model.unshadowed_specular_shading(mirror, light)
+    np.testing.assert_allclose(model.specular_shading(faces, mirror, sampling, seen, light), unshadowed, atol=1e-12)
+    np.testing.assert_allclose(model.specular_shading(faces, mirror, sampling, hidden, light), 0.0)
+    assert unshadowed.shape == (50, 3) and np.abs(unshadowed).max() > 0.1

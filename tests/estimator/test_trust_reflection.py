@@ -63,3 +63,22 @@ def test_no_other_view_explains_nothing():
     labels, estimated = np.full(2, -1), np.ones(2, bool)
     assert not reflected_rows(prep, labels, residual, relative, estimated, np.array([0]), 0.1)[0]
     assert reflected_rows(prep, labels, residual, relative, estimated, np.array([], int), 0.1).shape == (0,)
+
+
+def test_a_gross_error_within_the_two_shadow_bounds_of_its_reflection_is_not_a_fault():
+    """Rows of one face (diffuse shading 0.5, albedo 0.4 / specular 0.5, unshadowed reflection
+    0.8, the model's prediction shadowed): the reflection present (the shadow's edge crosses
+    the lobe) and the diffuse term alone are explained; glare on top of the reflection and an
+    occluder (black) are not."""
+    from estimator.diagnostics.trust import shadow_edge_rows
+
+    diffuse_only = 0.4 * 0.5
+    lit = diffuse_only + 0.5 * 0.8
+    rgb = np.array([lit, diffuse_only, lit + 0.6, 0.0, lit, lit, lit, lit])[:, None] * np.ones(3)
+    obs = SimpleNamespace(face=np.zeros(8, dtype=np.int64), rgb=rgb)
+    prep = SimpleNamespace(obs=obs, shading=lambda light: np.full((1, 3), 0.5),
+                           unshadowed_gloss=lambda rows, light: np.full((len(rows), 3), 0.8))
+    est = SimpleNamespace(diffuse=np.full((1, 3), 0.4), specular=np.full((1, 3), 0.5), light=None)
+    got = shadow_edge_rows(prep, est, np.array([0, 1, 2, 3]))
+    assert got.tolist() == [True, True, False, False]
+    assert shadow_edge_rows(prep, est, np.array([], dtype=np.int64)).shape == (0,)
