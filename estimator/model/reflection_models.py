@@ -128,7 +128,8 @@ class ReflectionModel(ABC):
     def unshadowed_specular_shading(self, mirror: np.ndarray, light: np.ndarray) -> np.ndarray:
         """(N, C) the reflection of the light unknown ``light`` (M, C) along mirrored view
         directions (N, 3) with nothing in the way: the pseudo illumination at the mirror
-        directions, h(r). :meth:`specular_shading` is this times a shadow term."""
+        directions, h(r). The paper's model shades it by the visibility along r; the lobe
+        model integrates the visibility and the horizon over its lobe, so this bounds it."""
         return sh.evaluate(self.order, mirror, self.pseudo_from_light(light))
 
     def pseudo_from_light(self, light: np.ndarray) -> np.ndarray:
