@@ -14,7 +14,7 @@
 #   PYTHON=...        interpreter with the project's dependencies (default .venv/bin/python,
 #                     else python3)
 #   SCENES="a b"      shipped scenes to time (default: real-light real-light-textured earth-specular)
-#   TEST_BUDGET=150   seconds for step 1
+#   TEST_BUDGET=150   seconds for step 1 (then pytest and any xdist workers are stopped)
 #   PYTEST_ARGS=      extra pytest arguments for step 1, e.g. "-n 8" where pytest-xdist is installed
 #   VARIANT=cuda_ad_rgb  the variant under check; VARIANT=llvm_ad_rgb rehearses the script on a
 #                     machine without a GPU (with PROFILE=tiny and a small TEST_BUDGET)
@@ -50,7 +50,7 @@ if ! "$PY" -c "import mitsuba as mi; mi.set_variant('$VARIANT')" 2>>"$OUT/gpu.tx
 fi
 
 echo "== 1. test suite on $VARIANT (budget ${TEST_BUDGET} s)"
-PSEUDOLIGHT_VARIANT=$VARIANT timeout "$TEST_BUDGET" "$PY" -m pytest -q -p no:cacheprovider $PYTEST_ARGS tests \
+PSEUDOLIGHT_VARIANT=$VARIANT timeout -k 10 "$TEST_BUDGET" "$PY" -m pytest -q -p no:cacheprovider $PYTEST_ARGS tests \
     >"$OUT/tests.log" 2>&1
 rc=$?
 tail -n 3 "$OUT/tests.log"
