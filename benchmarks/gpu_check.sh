@@ -56,7 +56,7 @@ rc=$?
 tail -n 3 "$OUT/tests.log"
 case $rc in
     0) echo "tests: passed" ;;
-    124) echo "tests: stopped at the budget (see $OUT/tests.log for how far they got)" ;;
+    124|137) echo "tests: stopped at the budget (see $OUT/tests.log for how far they got)" ;;
     *) echo "tests: FAILED (rc $rc)"; failed=1 ;;
 esac
 

@@ -118,28 +118,50 @@ def reflected_rows(prep: Prepared, labels: np.ndarray, residual: np.ndarray, rel
     return found & same_sign & (relative[first] > threshold)
 
 
-def shadow_edge_rows(prep: Prepared, est: Estimate, rows: np.ndarray) -> np.ndarray:
+def shadow_edge_rows(prep: Prepared, est: Estimate, rows: np.ndarray, shade: np.ndarray) -> np.ndarray:
     """Which of the given rows the shadow on their reflection explains rather than a fault of their view.
 
-    The model shades a face's reflection by its visibility along the mirror direction alone,
-    a yes-or-no stand-in for the visibility across the reflection's lobe. Where a shadow's
-    edge crosses the lobe, the true reflection lies anywhere between none and the unshadowed
-    one, and the error shows in the one view whose mirror direction falls there: the rows of
-    other views nearest in mirror direction lie on other faces with other shadows, so the
-    mirror test (:func:`reflected_rows`) cannot vouch for it. A row counts as explained when
-    its colour is within ``GROSS_RESIDUAL`` of the exposure level of one of the two bounds:
-    the diffuse term alone, or the diffuse term plus the unshadowed reflection.
+    The paper's model (and the defiltered one) shades a face's reflection by its visibility
+    along the mirror direction r alone, a yes-or-no stand-in for the visibility across the
+    reflection's lobe. Where the object shadows part of the lobe, the true reflection lies
+    anywhere between none and the unshadowed one, and the error shows in the one view whose
+    mirror direction falls there: the rows of other views nearest in mirror direction lie on
+    other faces with other shadows, so the mirror test (:func:`reflected_rows`) cannot vouch
+    for it. A row counts as explained when both hold:
 
-    rows : (R,) int indices into the observations. Returns (R,) bool.
+    * its face is shadowed by the object in some direction above its plane within 90 degrees
+      of r (the widest lobe; a face open to its whole hemisphere there has no such edge);
+    * its colour lies within ``GROSS_RESIDUAL`` of the exposure level of the segment between
+      the two bounds: the diffuse term alone, and the diffuse term plus the unshadowed
+      reflection h(r).
+
+    Models that integrate the visibility over their lobe (``shadow_along_mirror`` False)
+    explain nothing here. rows : (R,) int indices into the observations; shade : (N, 3) each
+    observation's diffuse shading C . x. Returns (R,) bool.
     """
     obs = prep.obs
+    if not prep.model.shadow_along_mirror or len(rows) == 0:
+        return np.zeros(len(rows), bool)
     face = obs.face[rows]
-    diffuse = est.diffuse[face] * prep.shading(est.light)[face]
-    unshadowed = diffuse + est.specular[face] * prep.unshadowed_gloss(rows, est.light)
-    level = exposure_level(obs.rgb)
-    nearest = np.minimum(np.linalg.norm(obs.rgb[rows] - diffuse, axis=1),
-                         np.linalg.norm(obs.rgb[rows] - unshadowed, axis=1)) / level
-    return nearest <= GROSS_RESIDUAL
+    low = est.diffuse[face] * shade[rows]
+    span = est.specular[face] * prep.unshadowed_gloss(rows, est.light)
+    offset = obs.rgb[rows] - low
+    t = np.clip(np.sum(offset * span, axis=1) / np.maximum(np.sum(span * span, axis=1), 1e-300), 0.0, 1.0)
+    near = np.linalg.norm(offset - t[:, None] * span, axis=1) / exposure_level(obs.rgb) <= GROSS_RESIDUAL
+    return near & _shadowed_near_mirror(prep, face, prep.row_mirrors(rows))
+
+
+def _shadowed_near_mirror(prep: Prepared, face: np.ndarray, mirror: np.ndarray, block: int = 4096) -> np.ndarray:
+    """(R,) bool: face (R,) is hidden by the object from some sample direction above its plane
+    within 90 degrees of its mirror direction (R, 3); in blocks of ``block`` rows."""
+    directions = prep.sampling.directions
+    normals = prep.data.mesh.face_normals
+    out = np.zeros(len(face), bool)
+    for lo in range(0, len(face), block):   # blocks bound the (block, K) masks for many rows
+        f, r = face[lo:lo + block], mirror[lo:lo + block]
+        hidden = (normals[f] @ directions.T > 0) & ~prep.visibility.unpack(f)
+        out[lo:lo + block] = np.any(hidden & (r @ directions.T > 0), axis=1)
+    return out
 
 
 def _add_neighbour_shares(views: list[dict], prep: Prepared) -> None:
@@ -186,7 +208,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     fault[gross_rows[reflected_rows(prep, est.labels, residual, relative, estimated, gross_rows,
                                     OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE))]] = False
     fault_rows = np.nonzero(fault)[0]
-    fault[fault_rows[shadow_edge_rows(prep, est, fault_rows)]] = False
+    fault[fault_rows[shadow_edge_rows(prep, est, fault_rows, shade)]] = False
     views = []
     view = _row_views(obs)
     # each view's exposure relative to the others (geometric mean over channels), a figure: a

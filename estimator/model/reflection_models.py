@@ -97,11 +97,14 @@ class ReflectionModel(ABC):
     light : 'pseudo' (x = h, the pseudo illumination) or 'radiance' (x = L).
     uses_exponent : whether the rows depend on ``config.phong_exponent`` (only then can
         the exponent be estimated by residual).
+    shadow_along_mirror : whether the reflection is shadowed by the visibility along the
+        mirror direction alone (True), or the visibility is integrated over the lobe.
     """
 
     name: ClassVar[str] = ""
     light: ClassVar[str] = "pseudo"
     uses_exponent: ClassVar[bool] = False
+    shadow_along_mirror: ClassVar[bool] = True
 
     def __init__(self, config: ReflectionConfig):
         self.config = config
@@ -129,7 +132,7 @@ class ReflectionModel(ABC):
         """(N, C) the reflection of the light unknown ``light`` (M, C) along mirrored view
         directions (N, 3) with nothing in the way: the pseudo illumination at the mirror
         directions, h(r). The paper's model shades it by the visibility along r; the lobe
-        model integrates the visibility and the horizon over its lobe, so this bounds it."""
+        model integrates the visibility and the horizon over its lobe instead."""
         return sh.evaluate(self.order, mirror, self.pseudo_from_light(light))
 
     def pseudo_from_light(self, light: np.ndarray) -> np.ndarray:
@@ -210,6 +213,7 @@ class LobeModel(ReflectionModel):
     name = "lobe"
     light = "radiance"
     uses_exponent = True
+    shadow_along_mirror = False
 
     def specular_rows(self, faces, mirror, sampling, visibility):
         return lobe_matrix(faces, mirror, sampling, visibility, self.order, self.config.phong_exponent)

@@ -113,23 +113,27 @@ def test_every_faces_diffuse_rows_are_kept_on_the_shadow_function_read_only():
     assert not np.array_equal(diffuse_matrix(turned, sampling, vis, 2), rows)
 
 
-@pytest.mark.parametrize("flags", [{}, {"diffuse_light": "defiltered"}])
-def test_unshadowed_reflection_is_the_reflection_with_every_direction_visible(flags):
-    """The pseudo models' reflection is h(r) times the visibility along r: with every
-    direction visible it is h(r) itself; with none, zero."""
+@pytest.mark.parametrize("flags", [{}, {"diffuse_light": "defiltered"}, {"specular_model": "lobe"}])
+def test_unshadowed_reflection_is_the_pseudo_illumination_at_the_mirror_direction(flags):
+    """h(r) = Y(r) . pseudo(x) for every model; the pseudo models' reflection is h(r) times
+    the visibility along r: with every direction visible it is h(r) itself, with none zero."""
     from estimator.rays.visibility import Visibility
 
-    model = reflection_model(EstimatorConfig(sh_order=4, **flags))
-    sampling = sphere_sampling(162)
+    model = reflection_model(EstimatorConfig(sh_order=4, phong_exponent=7.0, **flags))
     rng = np.random.default_rng(1)
     mirror = rng.standard_normal((50, 3))
     mirror /= np.linalg.norm(mirror, axis=1, keepdims=True)
     light = rng.standard_normal((25, 3))
-    faces = np.zeros(50, dtype=np.int64)
-    nbytes = (sampling.directions.shape[0] + 7) // 8
-    seen = Visibility(np.full((1, nbytes), 255, np.uint8), sampling.directions.shape[0])
-    hidden = Visibility(np.zeros((1, nbytes), np.uint8), sampling.directions.shape[0])
     unshadowed = model.unshadowed_specular_shading(mirror, light)
-    np.testing.assert_allclose(model.specular_shading(faces, mirror, sampling, seen, light), unshadowed, atol=1e-12)
-    np.testing.assert_allclose(model.specular_shading(faces, mirror, sampling, hidden, light), 0.0)
+    np.testing.assert_allclose(unshadowed, sh.basis(4, mirror) @ model.pseudo_from_light(light), atol=1e-12)
     assert unshadowed.shape == (50, 3) and np.abs(unshadowed).max() > 0.1
+    assert model.shadow_along_mirror == (not isinstance(model, LobeModel))
+    if model.shadow_along_mirror:
+        sampling = sphere_sampling(162)
+        faces = np.zeros(50, dtype=np.int64)
+        nbytes = (sampling.directions.shape[0] + 7) // 8
+        seen = Visibility(np.full((1, nbytes), 255, np.uint8), sampling.directions.shape[0])
+        hidden = Visibility(np.zeros((1, nbytes), np.uint8), sampling.directions.shape[0])
+        np.testing.assert_allclose(model.specular_shading(faces, mirror, sampling, seen, light), unshadowed,
+                                   atol=1e-12)
+        np.testing.assert_allclose(model.specular_shading(faces, mirror, sampling, hidden, light), 0.0)
