@@ -201,9 +201,10 @@ def test_a_refit_offers_the_first_fits_regions_and_the_glossy_micro_scene_gains(
     """The micro scene reflects its light through a Phong lobe (specular 0.2). Removing the
     coat's low orders leaves the corrected colours noisier than the segmentation holds, so the
     refit's own regions may fail; the first fit's regions, tied as they are, are offered beside
-    them (``light_from`` "edges and the first fit's regions"), and the correction brings the albedos nearer the truth (measured 18.3 -> 24.8 dB with
-    numpy 2.4, which keeps the first fit's regions; 18.3 -> 23.5 dB with numpy 2.5, whose
-    refit segments the corrected colours well enough to keep its own)."""
+    them (``light_from`` "edges and the first fit's regions"), and the correction brings the
+    albedos nearer the truth (measured 18.3 -> 24.8 dB with numpy 2.4, which keeps the first
+    fit's regions; 18.3 -> 23.5 dB with numpy 2.5, whose refit segments the corrected colours
+    well enough to keep its own)."""
     from dataclasses import replace
 
     from estimator.methods.retinex_segmented.method import RetinexSegmented
