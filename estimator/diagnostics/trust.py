@@ -25,6 +25,7 @@ NEIGHBOUR_VIEWS = 3         # ... and OUTLIER_VIEW_FACTOR x the median gross sha
 HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
 ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
 MAX_UNKEPT = 0.2            # share of faces without a kept observation
+PLANE_MARGIN = 1e-3         # cosine above a face's plane beyond float32 rounding of the visibility's own test
 
 
 CONDITION_ROWS = 200_000    # a streamed problem's light condition and mirror neighbours use this many rows
@@ -151,15 +152,17 @@ def shadow_edge_rows(prep: Prepared, est: Estimate, rows: np.ndarray, shade: np.
     return near & _shadowed_near_mirror(prep, face, prep.row_mirrors(rows))
 
 
-def _shadowed_near_mirror(prep: Prepared, face: np.ndarray, mirror: np.ndarray, block: int = 4096) -> np.ndarray:
+def _shadowed_near_mirror(prep: Prepared, face: np.ndarray, mirror: np.ndarray, cells: int = 4_000_000) -> np.ndarray:
     """(R,) bool: face (R,) is hidden by the object from some sample direction above its plane
-    within 90 degrees of its mirror direction (R, 3); in blocks of ``block`` rows."""
+    (by more than :data:`PLANE_MARGIN`) within 90 degrees of its mirror direction (R, 3); in
+    blocks of rows of at most ``cells`` (row, direction) pairs."""
     directions = prep.sampling.directions
     normals = prep.data.mesh.face_normals
+    block = max(1, cells // len(directions))
     out = np.zeros(len(face), bool)
     for lo in range(0, len(face), block):   # blocks bound the (block, K) masks for many rows
         f, r = face[lo:lo + block], mirror[lo:lo + block]
-        hidden = (normals[f] @ directions.T > 0) & ~prep.visibility.unpack(f)
+        hidden = (normals[f] @ directions.T > PLANE_MARGIN) & ~prep.visibility.unpack(f)
         out[lo:lo + block] = np.any(hidden & (r @ directions.T > 0), axis=1)
     return out
 

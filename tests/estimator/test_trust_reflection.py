@@ -66,42 +66,45 @@ def test_no_other_view_explains_nothing():
 
 
 def _shadow_prep(rgb: np.ndarray, face: np.ndarray, along_mirror: bool = True) -> SimpleNamespace:
-    """Rows ``rgb`` (N, 3) of two faces with normal +Z seen along their normal (mirror
-    direction +Z): face 0 open to its whole upper hemisphere, face 1 hidden by the object
-    from the directions within 30 degrees of +X; diffuse shading 0.5, unshadowed reflection
-    0.8 per channel."""
+    """Rows ``rgb`` (N, 3) of three faces with normal +Z, each seen with mirror direction r
+    tilted 60 degrees towards +X: face 0 open to its whole upper hemisphere (its directions
+    below the plane, within 90 degrees of r, are not shadows), face 1 hidden by the object
+    from the directions above its plane within 30 degrees of +X (within 90 degrees of r),
+    face 2 from those within 30 degrees of -X (all over 90 degrees from r); diffuse shading
+    0.5, unshadowed reflection 0.8 per channel."""
     from estimator.rays.visibility import Visibility, sphere_sampling
 
     sampling = sphere_sampling(162)
-    up = sampling.directions[:, 2] > 0
-    hidden = sampling.directions[:, 0] > np.cos(np.radians(30))
-    bits = np.packbits(np.stack([up, up & ~hidden]), axis=1)
+    d = sampling.directions
+    up = d[:, 2] > 0
+    near_x, near_minus_x = d[:, 0] > np.cos(np.radians(30)), -d[:, 0] > np.cos(np.radians(30))
+    bits = np.packbits(np.stack([up, up & ~near_x, up & ~near_minus_x]), axis=1)
+    mirror = np.array([np.sin(np.radians(60)), 0.0, np.cos(np.radians(60))])
     n = len(face)
     return SimpleNamespace(
-        obs=SimpleNamespace(face=face, rgb=rgb), sampling=sampling,
-        visibility=Visibility(bits, len(sampling.directions)),
-        data=SimpleNamespace(mesh=SimpleNamespace(face_normals=np.tile([0.0, 0.0, 1.0], (2, 1)))),
+        obs=SimpleNamespace(face=face, rgb=rgb), sampling=sampling, visibility=Visibility(bits, len(d)),
+        data=SimpleNamespace(mesh=SimpleNamespace(face_normals=np.tile([0.0, 0.0, 1.0], (3, 1)))),
         model=SimpleNamespace(shadow_along_mirror=along_mirror),
         unshadowed_gloss=lambda rows, light: np.full((len(rows), 3), 0.8),
-        row_mirrors=lambda rows: np.tile([0.0, 0.0, 1.0], (len(rows), 1))), np.full((n, 3), 0.5)
+        row_mirrors=lambda rows: np.tile(mirror, (len(rows), 1))), np.full((n, 3), 0.5)
 
 
 def test_a_gross_error_between_the_shadow_bounds_of_a_shadowed_face_is_not_a_fault():
     """Albedo 0.4, specular 0.5: the diffuse term alone is 0.2, with the unshadowed reflection
-    0.6. On the face the object shadows near its mirror direction, a row at either bound or
-    between them is explained; glare above the reflection and a black occluder (0, further
-    below the diffuse term than 20 % of the level) are not. On the face open to its whole
-    hemisphere nothing is: no shadow can cross its lobe. Nor under a model that integrates
-    the visibility over its lobe."""
+    0.6. On the face the object shadows within 90 degrees of its mirror direction, a row at
+    either bound or between them is explained; glare above the reflection and a black occluder
+    (0, further below the diffuse term than 20 % of the level) are not. On the face open to its
+    hemisphere, and on the face shadowed only beyond 90 degrees of r, nothing is. Nor under a
+    model that integrates the visibility over its lobe."""
     from estimator.diagnostics.trust import shadow_edge_rows
 
-    values = [0.6, 0.2, 0.4, 1.2, 0.0, 0.6, 0.2, 0.6, 0.6, 0.6]
+    values = [0.6, 0.2, 0.4, 1.2, 0.0, 0.6, 0.2, 0.6, 0.2, 0.6]
     rgb = np.array(values)[:, None] * np.ones(3)
-    face = np.array([1, 1, 1, 1, 1, 0, 0, 1, 1, 1])
-    est = SimpleNamespace(diffuse=np.full((2, 3), 0.4), specular=np.full((2, 3), 0.5), light=None)
+    face = np.array([1, 1, 1, 1, 1, 0, 0, 2, 2, 1])
+    est = SimpleNamespace(diffuse=np.full((3, 3), 0.4), specular=np.full((3, 3), 0.5), light=None)
     prep, shade = _shadow_prep(rgb, face)
-    got = shadow_edge_rows(prep, est, np.arange(7), shade)
-    assert got.tolist() == [True, True, True, False, False, False, False]
+    got = shadow_edge_rows(prep, est, np.arange(9), shade)
+    assert got.tolist() == [True, True, True, False, False, False, False, False, False]
     prep, shade = _shadow_prep(rgb, face, along_mirror=False)
-    assert not shadow_edge_rows(prep, est, np.arange(7), shade).any()
+    assert not shadow_edge_rows(prep, est, np.arange(9), shade).any()
     assert shadow_edge_rows(prep, est, np.array([], dtype=np.int64), shade).shape == (0,)
