@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import resource
 import signal
 import sys
@@ -318,8 +319,16 @@ CONFIG_FLAGS = ("components", "sh_order", "directions", "iterations", "min_cos_v
                 "ad_time_budget", "pose_rounds")  # flags named as EstimatorConfig fields
 
 
+FLAG_NAMES = {"ad_time_budget": "--time-budget", "pose_rounds": "--refine-poses"}   # else --key-with-dashes
+
+
 def _config_flags(args) -> dict:
     return {k: getattr(args, k) for k in CONFIG_FLAGS if getattr(args, k, None) is not None}
+
+
+def _flag_of(key: str) -> str:
+    """The command-line flag that sets the EstimatorConfig field ``key``."""
+    return FLAG_NAMES.get(key, "--" + key.replace("_", "-"))
 
 
 def _positive_float(flag: str, text: str, auto: bool = False) -> float:
@@ -391,8 +400,9 @@ def cmd_estimate(args) -> int:
     settings = _estimator_sets(args.set or [])
     try:
         method, config = estimator_settings(ds.meta, args.method, {**flags, **settings})
-    except InputError as exc:
-        named = [f"--set {key}" for key in settings if key in str(exc)]
+    except InputError as exc:   # name the flag or --set entry whose setting the message names
+        named = [f"--set {key}" for key in settings if re.search(rf"\b{key}\b", str(exc))]
+        named += [_flag_of(key) for key in flags if re.search(rf"\b{key}\b", str(exc))]
         raise InputError(f"{named[0]}: {exc}" if named else str(exc)) from None
     if "ad_time_budget" in flags and method != "mitsuba-ad":
         raise InputError(f"--time-budget applies to mitsuba-ad (the iterative peer), not to {method}")

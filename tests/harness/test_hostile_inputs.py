@@ -772,3 +772,14 @@ def test_estimate_set_reaches_every_estimator_setting(copy, tmp_path, capsys):
                  absent=[tmp_path / "x"])
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--set", "sh_order=many"],
                  "--set sh_order:", "sh_order must be int", inputs=[ds], absent=[tmp_path / "x"])
+
+
+def test_a_bad_flag_value_is_refused_naming_the_flag(copy, tmp_path, capsys):
+    """A flag that sets an estimator setting under another name (``--time-budget`` sets
+    ``ad_time_budget``) is named in the refusal, beside the setting."""
+    ds, _, _ = copy
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--method", "mitsuba-ad", "--time-budget", "-1"],
+                 "--time-budget: estimator config: ad_time_budget must be > 0", inputs=[ds],
+                 absent=[tmp_path / "x"])
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--sh-order", "99"],
+                 "--sh-order: estimator config: sh_order must lie in", inputs=[ds], absent=[tmp_path / "x"])
