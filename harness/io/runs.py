@@ -9,7 +9,7 @@ from importlib import metadata
 
 import numpy as np
 
-from estimator import DEFAULT_METHOD, Estimate, EstimatorConfig, InputError, sh
+from estimator import DEFAULT_METHOD, Estimate, EstimatorConfig, InputError, get_method, sh
 from harness.io.atomic import atomic_directory
 from harness.io.exr import write_exr
 from harness.io.jsonio import dump_json, load_json
@@ -38,6 +38,12 @@ def estimator_settings(meta: dict, method: str | None = None, overrides: dict | 
     unknown = sorted(set(chosen) - known)
     if unknown:
         raise InputError(f"transforms.json estimator_defaults: unknown key(s) {', '.join(unknown)}")
+    try:   # the dataset's own values that the caller keeps, named as the dataset's
+        EstimatorConfig(**{k: v for k, v in chosen.items() if k not in (overrides or {})})
+        if method is None:
+            get_method(default_method)
+    except InputError as exc:
+        raise InputError(f"transforms.json estimator_defaults: {exc}") from None
     chosen.update(overrides or {})
     return method or default_method, EstimatorConfig(**chosen)
 

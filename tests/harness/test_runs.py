@@ -38,3 +38,24 @@ def test_estimate_errors(tiny_earth, tmp_path, capsys):
     assert main(["render", str(tmp_path), "-o", str(tmp_path / "p")]) == 2
     assert "not a run folder" in capsys.readouterr().err
     assert not (tmp_path / "r").exists() and not (tmp_path / "p").exists()
+
+
+def test_a_bad_estimator_default_of_the_dataset_is_named_as_transforms_json():
+    """A dataset's ``estimator_defaults`` (its scene's [estimator] table, written into
+    transforms.json) is refused naming transforms.json: a wrong value, an unknown method, a
+    non-object; a value the caller overrides is not checked."""
+    import pytest
+
+    from estimator import InputError
+    from harness.io.runs import estimator_settings
+
+    for defaults, needle in (({"sh_order": "x"}, "sh_order must be int"),
+                             ({"method": "nope"}, "unknown method 'nope'"),
+                             ({"shorder": 3}, "unknown key(s) shorder"),
+                             ([1], "must be an object")):
+        with pytest.raises(InputError) as err:
+            estimator_settings({"estimator_defaults": defaults})
+        assert str(err.value).startswith("transforms.json estimator_defaults") and needle in str(err.value)
+    method, config = estimator_settings({"estimator_defaults": {"method": "nope", "sh_order": "x"}},
+                                        "median-color", {"sh_order": 3})
+    assert method == "median-color" and config.sh_order == 3
