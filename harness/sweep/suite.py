@@ -123,7 +123,10 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:  # noqa: 
         if not isinstance(s.get("scene"), str) or not s["scene"]:
             raise SpecError(f"{where}: scene must be a scene name or a spec path, got {s.get('scene')!r}")
         local = os.path.join(os.path.dirname(os.path.abspath(path)), s["scene"])
-        spec_path = local if os.path.isfile(local) else resolve_scene(s["scene"])
+        try:
+            spec_path = local if os.path.isfile(local) else resolve_scene(s["scene"])
+        except SpecError as exc:
+            raise SpecError(f"{where}: {exc}") from None
         sweep, fixed = s.get("sweep", {}), s.get("set", {})
         if not isinstance(sweep, dict) or not all(isinstance(v, list) and v for v in sweep.values()):
             raise SpecError(f"{where}: sweep must map dotted spec keys to non-empty lists of values")
@@ -138,7 +141,10 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:  # noqa: 
             for seed in seeds:
                 overrides = {**fixed, **values, **({} if seed is None else {"seed": seed})}
                 job = DatasetJob(s["scene"], spec_path, forced or s.get("profile", profile), overrides, values, seed)
-                load_spec(job.spec_path, job.profile, job.overrides)   # every point must be a valid spec
+                try:
+                    load_spec(job.spec_path, job.profile, job.overrides)   # every point must be a valid spec
+                except SpecError as exc:
+                    raise SpecError(f"{where}: {values or 'its scene'}: {exc}") from None
                 datasets.append(job)
     return {"name": raw.get("name", os.path.splitext(os.path.basename(path))[0]), "path": os.path.abspath(path),
             "datasets": datasets, "methods": methods}

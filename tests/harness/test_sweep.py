@@ -55,6 +55,18 @@ def test_bad_suites_name_the_problem(tmp_path, text, needle):
         load_suite(_suite_file(tmp_path, text))
 
 
+@pytest.mark.parametrize("text, needle", [
+    ('methods = ["median-color"]\nscenes = ["sparse-colored", "nope"]', r"suite\.toml: scenes\[1\]: no scene spec"),
+    ('methods = ["median-color"]\n[[scenes]]\nscene = "sparse-colored"\nsweep = { "cameras.count" = [6, -3] }',
+     r"suite\.toml: scenes\[0\]: \{'cameras\.count': -3\}: cameras\.count must be >= 1"),
+    ('methods = ["median-color"]\n[[scenes]]\nscene = "sparse-colored"\nset = { "cameras.bogus" = 3 }',
+     r"suite\.toml: scenes\[0\]: its scene: unknown key cameras\.bogus"),
+])
+def test_a_bad_scene_entry_names_the_suite_file_and_the_entry(tmp_path, text, needle):
+    with pytest.raises(SpecError, match=needle):
+        load_suite(_suite_file(tmp_path, text))
+
+
 def test_identity_changes_with_the_code_version(monkeypatch):
     a = jobs.identity({"x": 1})
     monkeypatch.setattr(jobs, "code_version", lambda: "other")
