@@ -143,13 +143,13 @@ def shadow_edge_rows(prep: Prepared, est: Estimate, rows: np.ndarray, shade: np.
     obs = prep.obs
     if not prep.model.shadow_along_mirror or len(rows) == 0:
         return np.zeros(len(rows), bool)
-    face = obs.face[rows]
+    face, mirror = obs.face[rows], prep.row_mirrors(rows)
     low = est.diffuse[face] * shade[rows]
-    span = est.specular[face] * prep.unshadowed_gloss(rows, est.light)
+    span = est.specular[face] * prep.model.unshadowed_specular_shading(mirror, est.light)
     offset = obs.rgb[rows] - low
     t = np.clip(np.sum(offset * span, axis=1) / np.maximum(np.sum(span * span, axis=1), 1e-300), 0.0, 1.0)
     near = np.linalg.norm(offset - t[:, None] * span, axis=1) / exposure_level(obs.rgb) <= GROSS_RESIDUAL
-    return near & _shadowed_near_mirror(prep, face, prep.row_mirrors(rows))
+    return near & _shadowed_near_mirror(prep, face, mirror)
 
 
 def _shadowed_near_mirror(prep: Prepared, face: np.ndarray, mirror: np.ndarray, cells: int = 4_000_000) -> np.ndarray:

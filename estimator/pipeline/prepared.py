@@ -126,11 +126,6 @@ class Prepared:
             return self.d_rows @ light
         return self._projection("gloss", light, len(self.obs.face), lambda part: self._gloss_rows(part, light))
 
-    def unshadowed_gloss(self, rows: np.ndarray, light: np.ndarray) -> np.ndarray:
-        """(n, C) the reflection of the light unknown ``light`` (M, C) in the kept observations
-        ``rows`` (n,) with no shadow on it (:meth:`ReflectionModel.unshadowed_specular_shading`)."""
-        return self.model.unshadowed_specular_shading(self.row_mirrors(rows), light)
-
     def row_mirrors(self, rows: np.ndarray) -> np.ndarray:
         """(n, 3) the view direction of the kept observations ``rows`` (n,) mirrored about their face's normal."""
         return self._mirrored(rows)[1]

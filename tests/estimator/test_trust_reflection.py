@@ -84,8 +84,8 @@ def _shadow_prep(rgb: np.ndarray, face: np.ndarray, along_mirror: bool = True) -
     return SimpleNamespace(
         obs=SimpleNamespace(face=face, rgb=rgb), sampling=sampling, visibility=Visibility(bits, len(d)),
         data=SimpleNamespace(mesh=SimpleNamespace(face_normals=np.tile([0.0, 0.0, 1.0], (3, 1)))),
-        model=SimpleNamespace(shadow_along_mirror=along_mirror),
-        unshadowed_gloss=lambda rows, light: np.full((len(rows), 3), 0.8),
+        model=SimpleNamespace(shadow_along_mirror=along_mirror,
+                              unshadowed_specular_shading=lambda mirror, light: np.full((len(mirror), 3), 0.8)),
         row_mirrors=lambda rows: np.tile(mirror, (len(rows), 1))), np.full((n, 3), 0.5)
 
 
