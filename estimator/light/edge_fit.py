@@ -45,7 +45,11 @@ class EdgeFitConfig(Section):
     Attributes
     ----------
     retinex_quantile : a face's diffuse radiance is this quantile of its colours over the
-        views (low: a coat's highlights move with the view and rarely reach it).
+        views (low: a coat's highlights move with the view and rarely reach it). Measured on
+        the random family's 40 development seeds (1000-1039, full size): 0.1 left the median
+        PSNR (33.8 dB), the share of seeds with 90 % of faces within ±10 % (0.375) and the
+        5th percentile (23.0 against 22.7 dB) as they are, seeds moving by up to 2 dB either
+        way; 0.3 lost 1 dB of median on seeds 1000-1020.
     retinex_ridge : weight of the (l (l + 1))^2 penalty on the light, per row (a
         tie-breaker for coefficients the shading does not see).
     retinex_iterations : Gauss-Newton steps of the edge fit per channel.
