@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
 from ..core.data import TriangleMesh
 from ..core.settings import Section
@@ -39,7 +40,9 @@ class IndirectConfig(Section):
 
 def indirect_shading(caster: RayCaster, sampling: SphereSampling, visibility: Visibility, radiance: np.ndarray,
                      max_rays: int = 4_000_000, offset: float = 1e-4) -> np.ndarray:
-    """(F, 3) one-bounce indirect diffuse shading of every face.
+    """(F, 3) one-bounce indirect diffuse shading of every face, traced in chunks of faces (memory
+    bounded by ``max_rays``; :func:`indirect_transfer` holds the same operator whole, for a solve
+    that asks again).
 
     Parameters
     ----------
@@ -49,11 +52,38 @@ def indirect_shading(caster: RayCaster, sampling: SphereSampling, visibility: Vi
     max_rays : rays traced per batch (faces are taken in chunks of max_rays / K).
     offset : ray origins sit this fraction of the bounding-box diagonal above the centroid.
     """
+    f = caster.mesh.num_faces
+    out = np.zeros((f, 3))
+    for start, stop, rows, hit, weight in _bounces(caster, sampling, visibility, max_rays, offset):
+        contribution = weight[:, None] * radiance[hit]
+        out[start:stop] = np.stack([np.bincount(rows, contribution[:, c], minlength=stop - start)
+                                    for c in range(3)], axis=1)
+    return out
+
+
+def indirect_transfer(caster: RayCaster, sampling: SphereSampling, visibility: Visibility,
+                      max_rays: int = 4_000_000, offset: float = 1e-4) -> sparse.csr_matrix:
+    """(F, F) the operator T of :func:`indirect_shading`, whose result is T @ radiance: T[f, g]
+    sums (1/pi) w_k max(0, w_k . n_f) over the directions k blocked at f by face g. It depends
+    on the mesh alone, so a solve that shades several radiances (the default's fit and its coat
+    refits) traces the rays once; it holds one entry per blocked direction that hits a face,
+    which is why :func:`indirect_shading` streams instead for a problem shaded once."""
+    f = caster.mesh.num_faces
+    parts = [(start + rows, hit, weight) for start, _, rows, hit, weight in
+             _bounces(caster, sampling, visibility, max_rays, offset)]
+    if not parts:
+        return sparse.csr_matrix((f, f))
+    face, hit, weight = (np.concatenate(column) for column in zip(*parts))
+    return sparse.csr_matrix((weight, (face, hit)), shape=(f, f))
+
+
+def _bounces(caster: RayCaster, sampling: SphereSampling, visibility: Visibility, max_rays: int, offset: float):
+    """Per chunk of faces [start, stop): the face (relative to start), the face hit and the
+    weight (1/pi) w_k max(0, w_k . n_f) of every blocked direction k that hits a face."""
     mesh: TriangleMesh = caster.mesh
     f, k = mesh.num_faces, len(sampling.directions)
     normals, centroids = mesh.face_normals, mesh.centroids
     weight = sampling.weights / np.pi
-    out = np.zeros((f, 3))
     chunk = max(1, max_rays // k)
     for start in range(0, f, chunk):
         stop = min(start + chunk, f)
@@ -66,7 +96,4 @@ def indirect_shading(caster: RayCaster, sampling: SphereSampling, visibility: Vi
         origins = centroids[faces] + offset * caster.scale * normals[faces]
         hit = caster.first_hit_faces(origins, sampling.directions[cols])
         seen = hit >= 0
-        contribution = (weight[cols] * cos[rows, cols])[seen, None] * radiance[hit[seen]]
-        out[start:stop] = np.stack([np.bincount(rows[seen], contribution[:, c], minlength=stop - start)
-                                    for c in range(3)], axis=1)
-    return out
+        yield start, stop, rows[seen], hit[seen], (weight[cols] * cos[rows, cols])[seen]

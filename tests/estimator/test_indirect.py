@@ -3,7 +3,7 @@ direction above a face sees the sphere again."""
 import numpy as np
 
 from estimator.core.data import TriangleMesh
-from estimator.light.indirect import indirect_shading
+from estimator.light.indirect import indirect_shading, indirect_transfer
 from estimator.rays.raycast import RayCaster
 from estimator.rays.visibility import compute_visibility, sphere_sampling
 
@@ -32,3 +32,20 @@ def test_a_convex_object_receives_no_indirect_light():
     sampling = sphere_sampling(300)
     shading = indirect_shading(caster, sampling, compute_visibility(caster, sampling), np.ones((mesh.num_faces, 3)))
     assert np.abs(shading).max() < 1e-3
+
+
+def test_the_transfer_operator_is_the_traced_shading_held_whole():
+    """indirect_transfer @ radiance is indirect_shading(radiance) for any radiance, traced in
+    any chunking: the operator a solve keeps for its refits changes nothing but the time."""
+    ball = sphere(2)
+    inside = TriangleMesh(ball.vertices, ball.faces[:, ::-1])
+    caster = RayCaster(inside)
+    sampling = sphere_sampling(300)
+    visibility = compute_visibility(caster, sampling)
+    radiance = np.random.default_rng(0).uniform(0.0, 1.0, (inside.num_faces, 3))
+    transfer = indirect_transfer(caster, sampling, visibility, max_rays=5_000)   # several chunks
+    assert transfer.shape == (inside.num_faces, inside.num_faces) and transfer.nnz > 0
+    np.testing.assert_allclose(transfer @ radiance, indirect_shading(caster, sampling, visibility, radiance),
+                               rtol=1e-12, atol=1e-15)
+    convex = RayCaster(sphere(1))
+    assert indirect_transfer(convex, sampling, compute_visibility(convex, sampling)).nnz == 0

@@ -202,8 +202,9 @@ class RetinexSegmented(Method):
                          dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
                               max_edges=c.retinex_max_edges))
         if c.interreflection:
-            ctx.fit["indirect"] = ctx.extra = indirect.indirect_shading(
-                prep.caster, prep.sampling, prep.visibility, np.where(usable[:, None], radiance, 0.0))
+            if fits.transfer is None:
+                fits.transfer = indirect.indirect_transfer(prep.caster, prep.sampling, prep.visibility)
+            ctx.fit["indirect"] = ctx.extra = fits.transfer @ np.where(usable[:, None], radiance, 0.0)
         hypotheses = light_hypotheses(ctx, radiance, found, labels)
         estimates = [to_estimate(ctx, h, self) for h in hypotheses]
         best = choose(prep, hypotheses, estimates)

@@ -7,6 +7,7 @@ from enum import Enum
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy import sparse
 
 from ...core import sh
 from ...light import coat
@@ -97,11 +98,14 @@ class Hypothesis:
 @dataclass
 class ReflectionFits:
     """The view-dependent fits of one solve, made on first need from the observations before any
-    coat correction: the coat's map and the lobe's light with the lobe rows of every observation."""
+    coat correction: the coat's map and the lobe's light with the lobe rows of every observation;
+    and the interreflection's operator (:func:`estimator.light.indirect.indirect_transfer`),
+    which the fit and each coat refit apply to their own radiance."""
 
     observations: Observations
     coat_map: ReflectedLight | None = None
     lobe: tuple[LobeLight, np.ndarray] | None = None
+    transfer: sparse.csr_matrix | None = None
 
 
 @dataclass
