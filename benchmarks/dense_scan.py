@@ -40,11 +40,12 @@ from harness.io.runs import estimator_settings
 ds = read_dataset({folder!r}, load_test=False, load_truth=False)
 truth = read_ground_truth({folder!r}, ds.data.mesh.num_faces)
 method, config = estimator_settings(ds.meta, None, {overrides!r})
-est = estimate(ds.data, method, config)
-from estimator.rays.raycast import RayCaster
 import numpy as np
-seen = np.zeros(ds.data.mesh.num_faces, dtype=bool)   # faces some pixel centre hits
-for ids in RayCaster(ds.data.mesh).face_id_buffers([v.camera for v in ds.data.views]):
+from estimator.rays.raycast import RayCaster
+caster = RayCaster(ds.data.mesh)
+est = estimate(ds.data, method, config, caster=caster)
+seen = np.zeros(ds.data.mesh.num_faces, dtype=bool)   # faces some pixel centre hits: the estimate's kept buffers
+for ids in caster.face_id_buffers([v.camera for v in ds.data.views]):
     seen[ids[ids >= 0]] = True
 print(json.dumps({{"faces": ds.data.mesh.num_faces, "method": method, **score(ds, truth, est),
                   "seen_faces": int(seen.sum()), "estimated_of_seen": float(est.observed[seen].mean()),
