@@ -8,7 +8,7 @@ from estimator.core import sh
 from estimator.core.data import TriangleMesh
 from estimator.core.errors import InputError
 from estimator.light.edge_fit import log_shading_fit
-from estimator.light.sun import brightest_direction, find_sun, sun_shading, sun_shadings
+from estimator.light.sun import brightest_direction, find_sun, find_suns, sun_shading, sun_shadings
 from estimator.model.reflection import diffuse_matrix, fresnel_dielectric
 from estimator.model.reflection_models import reflection_model
 from estimator.rays.raycast import ELSEWHERE, MISS, ClusterCaster, RayCaster
@@ -211,3 +211,23 @@ def test_a_dark_patch_shaped_like_a_sun_is_no_sun(scene):
     found = find_sun(radiance, c_matrix, mesh.face_adjacency, np.ones(mesh.num_faces, dtype=bool), mesh, caster,
                      sh.fibonacci_sphere(500), start=_unit([0.5, 0.7, 0.3]))
     assert not found.explains
+
+
+def test_find_suns_finds_a_second_lamp_of_another_colour(scene):
+    """Two suns of different colours with exact shadows beside the sky: with ``max_suns`` 3 the
+    search keeps both (each within 2 degrees; the first the brighter) and no third (its BIC
+    price is not paid); with the default of one it keeps one, as :func:`find_sun` does."""
+    mesh, caster, c_matrix, albedo, sky = scene
+    to_a, to_b = _unit([0.5, 0.7, 0.3]), _unit([-0.6, 0.3, -0.5])
+    columns = sun_shadings(mesh, caster, np.array([to_a, to_b]))
+    radiance = albedo * (c_matrix @ sky + columns @ np.array([[3.0, 2.5, 1.5], [0.6, 1.2, 2.0]]))
+    usable = np.ones(mesh.num_faces, dtype=bool)
+    args = (radiance, c_matrix, mesh.face_adjacency, usable, mesh, caster, sh.fibonacci_sphere(500))
+    found = find_suns(*args, max_suns=3)
+    assert found.explains and found.directions.shape == (2, 3)
+    assert np.degrees(np.arccos(np.clip(found.directions @ to_a, -1, 1)))[0] < 2.0
+    assert np.degrees(np.arccos(np.clip(found.directions @ to_b, -1, 1)))[1] < 2.0
+    one = find_suns(*args)
+    assert one.directions.shape == (1, 3)
+    np.testing.assert_allclose(one.direction, find_sun(*args).direction)
+

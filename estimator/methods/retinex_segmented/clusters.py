@@ -102,8 +102,8 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
     m = sh.num_coeffs(model.order)
     shade = prep.shading(h.light[:m], h.shading.coat_ior)
     if h.shading.sun is not None:
-        column = sun.sun_shading(mesh, prep.caster, h.shading.sun.direction, h.shading.sun.coat_ior)
-        shade = shade + column[:, None] * h.light[m]
+        columns = sun.sun_shadings(mesh, prep.caster, h.shading.sun.directions, h.shading.sun.coat_ior)
+        shade = shade + columns @ h.light[m:]
     if c.interreflection:
         shade = shade + indirect.indirect_shading(prep.caster, prep.sampling, prep.visibility,
                                                   np.where(usable[:, None], radiance, 0.0))

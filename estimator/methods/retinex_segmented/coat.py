@@ -3,6 +3,8 @@ lat-long map fitted to the colours' changes across views, which no albedo can bi
 map fit's diffuse radiance (the coat's reflection removed) under the edges' light."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ...core import sh
@@ -125,9 +127,8 @@ def coated_diffuse(ctx: FitContext, edges: Hypothesis) -> tuple[np.ndarray, Shad
     mesh = prep.data.mesh
     shading = through_coat(ctx)
     if edges.shading.sun is not None:
-        found = edges.found
-        found = sun.Sun(found.direction, found.cost_ratio, found.evaluations, c.coat_ior)
-        shading = shading.with_sun(found, sun.sun_shading(mesh, prep.caster, found.direction, c.coat_ior))
+        found = replace(edges.found, coat_ior=c.coat_ior)
+        shading = shading.with_sun(found, sun.sun_shadings(mesh, prep.caster, found.directions, c.coat_ior))
     radiance = np.where(np.isfinite(fitted.diffuse) & (fitted.diffuse > 0), fitted.diffuse, edges.radiance)
     return radiance, shading
 

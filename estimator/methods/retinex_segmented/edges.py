@@ -22,13 +22,13 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
     mesh = prep.data.mesh
     shading = Shading(prep.c_matrix)
     if found is None and c.sun_min_gain < 1:
-        found = sun.find_sun(radiance, shading.columns, ctx.edges, ctx.usable, mesh, prep.caster,
-                             prep.sampling.directions, loss=ctx.loss,
-                             coat_ior=c.coat_ior if c.coat_correction else None)
+        found = sun.find_suns(radiance, shading.columns, ctx.edges, ctx.usable, mesh, prep.caster,
+                              prep.sampling.directions, loss=ctx.loss,
+                              coat_ior=c.coat_ior if c.coat_correction else None, max_suns=c.max_suns)
     if found is not None and found.explains and found.cost_ratio <= 1 - c.sun_min_gain:
-        shading = shading.with_sun(found, sun.sun_shading(mesh, prep.caster, found.direction, found.coat_ior))
+        shading = shading.with_sun(found, sun.sun_shadings(mesh, prep.caster, found.directions, found.coat_ior))
     light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
-    if shading.sun is not None and np.any(light[-1] <= 0):   # no dark "sun"
+    if shading.sun is not None and np.any(light[ctx.sky_width:] <= 0):   # no dark "sun"
         shading = Shading(prep.c_matrix)
         light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)

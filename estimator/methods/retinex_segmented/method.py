@@ -166,9 +166,7 @@ class RetinexSegmented(Method):
         est.info["coat_costs"] = None
         if not candidates:
             return est, chosen, None
-        s = est.info["sun"]
-        found = s and sun.Sun(np.array(s["direction"]), s["cost_ratio"], 0,
-                              c.coat_ior if s["through_coat"] else None, s["gain"], s["penalty"])
+        found = chosen.found and replace(chosen.found, evaluations=0)   # the first fit's sun, not searched again
         regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
         fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions)
                   for _, reflection in candidates]

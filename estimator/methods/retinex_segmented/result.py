@@ -25,14 +25,16 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
                                             "gain": found.gain, "penalty": found.penalty,
                                             "evaluations": found.evaluations, "used": used,
                                             "through_coat": found.coat_ior is not None}
-    irradiance = light[m:m + 1]
+    irradiance = light[m:]                  # one row per source of the sun (none without one)
     if used:
         light = light[:m] + model.unknown_from_radiance(
-            sh.project_directional(sh.order_of(m), found.direction[None, :], irradiance))
+            sh.project_directional(sh.order_of(m), found.directions, irradiance))
     light, dc = unit_dc(light)
     albedo = h.albedo * dc
     if used:                # in the reported light's gauge
         sun_info["irradiance"] = (irradiance[0] / dc).tolist()
+        sun_info["others"] = [{"direction": d.tolist(), "irradiance": (e / dc).tolist()}
+                              for d, e in zip(found.others, irradiance[1:])]
     labels, regions = h.labels, h.regions
     group = labels.copy()
     free = np.nonzero(group < 0)[0]

@@ -49,17 +49,18 @@ class LightSource(str, Enum):
 
 @dataclass(frozen=True)
 class Shading:
-    """Each face's shading columns: (F, M) for the SH light, then the sun's column when ``sun``
-    is set (its irradiance is the light's last row). ``coat_ior``: the SH columns hold the light
-    that passes a smooth coat of that index on its way in (None: the model's diffuse rows)."""
+    """Each face's shading columns: (F, M) for the SH light, then one column per source of the
+    sun when ``sun`` is set (:attr:`Sun.directions`; their irradiances are the light's last rows).
+    ``coat_ior``: the SH columns hold the light that passes a smooth coat of that index on its way
+    in (None: the model's diffuse rows)."""
 
     columns: np.ndarray
     sun: Sun | None = None
     coat_ior: float | None = None
 
     def with_sun(self, sun: Sun, column: np.ndarray) -> "Shading":
-        """(F, M + 1): these columns and the sun's (F,) column."""
-        return Shading(np.hstack([self.columns, column[:, None]]), sun, self.coat_ior)
+        """(F, M + S): these columns and the sun's (F,) column, or its S sources' (F, S)."""
+        return Shading(np.hstack([self.columns, column.reshape(len(column), -1)]), sun, self.coat_ior)
 
 
 @dataclass
@@ -69,7 +70,7 @@ class Hypothesis:
     Attributes
     ----------
     radiance : (F, 3) each face's diffuse radiance the light was fitted to.
-    light : (M', 3) the light unknown (the sun's irradiance last when ``shading.sun``).
+    light : (M', 3) the light unknown (the sun's irradiances last when ``shading.sun``).
     shading : the columns the light multiplies.
     albedo : (F, 3) radiance over the shading (a region's faces share its albedo).
     lit : (F,) faces whose albedo is determined.
