@@ -65,6 +65,8 @@ class Observations:
     unresolved : (num_faces,) bool, faces observed through their pixel centres (a footprint's
         mean over them and their neighbours) because pure pixels resolve too few faces
         (:func:`gather_observations`); None when no face is, or without ``pure_pixels``.
+    footprint_pixels : the mean number of pixels a row of an unresolved face averages (its
+        pixel centres in that view); None when no face is unresolved.
     """
 
     face: np.ndarray
@@ -75,11 +77,13 @@ class Observations:
     rejected: np.ndarray | None = None
     view: np.ndarray | None = None
     unresolved: np.ndarray | None = None
+    footprint_pixels: float | None = None
 
     def subset(self, keep: np.ndarray) -> "Observations":
         """The rows where ``keep`` (N,) is true."""
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
-                            self.rejected, None if self.view is None else self.view[keep], self.unresolved)
+                            self.rejected, None if self.view is None else self.view[keep], self.unresolved,
+                            self.footprint_pixels)
 
     def merged(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> "Observations":
         """One row per (cluster, view) pair: the ``weight``-weighted mean colour and view
@@ -197,10 +201,11 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         if row is not None:
             covered[row[0]] = True
     footprint = ~covered if not pure_pixels or 2 * covered.sum() < hit.sum() else np.zeros(f, dtype=bool)
-    parts = []
+    parts, footprint_pixels = [], 0
     for index, (view, ids, valid, row) in enumerate(zip(views, centre_ids, usable, pure_rows)):
         if footprint.any():   # the footprint rows, and the pure rows (none without pure_pixels)
             faces, means = _face_means(ids.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels, skip=~footprint)
+            footprint_pixels += int(np.bincount(ids.ravel()[valid], minlength=f)[faces].sum())
             if row is not None:
                 order = np.argsort(np.concatenate([row[0], faces]), kind="stable")
                 faces, means = np.concatenate([row[0], faces])[order], np.concatenate([row[1], means])[order]
@@ -223,5 +228,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     _check_exposure_levels(views, np.array(levels))
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
     unresolved = footprint & (np.bincount(face, minlength=f) > 0)
+    dense = pure_pixels and unresolved.any()
     return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
-                        view_index.astype(np.int64), unresolved if pure_pixels and unresolved.any() else None)
+                        view_index.astype(np.int64), unresolved if dense else None,
+                        footprint_pixels / max(int(unresolved[face].sum()), 1) if dense else None)

@@ -33,7 +33,8 @@ class StreamingConfig(Section):
     light_faces : a streamed solve finds the light from the observations of this many
         observed faces, then every face's albedos with the light fixed: 121 light
         coefficients are determined many times over by 20,000 faces. The per-face methods
-        draw them at random (seeded); the default solves on this many clusters of faces.
+        draw them at random (seeded); the default solves on at most this many clusters of
+        faces (fewer on a mesh denser than its photos, ``retinex_segmented.clusters``).
     """
 
     dense_rows: int = 1_500_000

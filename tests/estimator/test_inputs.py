@@ -108,9 +108,12 @@ def test_faces_smaller_than_a_pixel_are_observed_through_their_pixel_centres(siz
     np.testing.assert_allclose(obs.rgb[through_pure], _means(pure, image, obs.face[through_pure]), rtol=1e-12)
     np.testing.assert_allclose(obs.rgb[~through_pure], _means(ids, image, obs.face[~through_pure]), rtol=1e-12)
     if dense:
-        np.testing.assert_array_equal(np.nonzero(obs.unresolved)[0], np.setdiff1d(hit, covered))
+        unresolved = np.setdiff1d(hit, covered)
+        np.testing.assert_array_equal(np.nonzero(obs.unresolved)[0], unresolved)
+        # the mean pixel-centre count of an unresolved face's row
+        assert obs.footprint_pixels == pytest.approx(np.isin(ids, unresolved).sum() / len(unresolved), rel=1e-12)
     else:
-        assert obs.unresolved is None
+        assert obs.unresolved is None and obs.footprint_pixels is None
     centres = gather_observations(caster, [View("v", cam, image)], pure_pixels=False)
     np.testing.assert_allclose(centres.rgb, _means(ids, image, hit), rtol=1e-12)
     assert centres.unresolved is None

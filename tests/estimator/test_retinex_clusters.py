@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.methods.retinex_segmented.clusters import face_clusters
+from types import SimpleNamespace
+
+import pytest
+
+from estimator.methods.retinex_segmented.clusters import RESOLVED_PIXELS, cluster_count, face_clusters
 from estimator.pipeline.observations import Observations
 
 from .meshes import sphere
@@ -50,3 +54,30 @@ def test_merged_observations_are_area_weighted_means_per_cluster_and_view():
     np.testing.assert_allclose(merged.rgb[:, 0], [(1 + 3 * 3) / 4, 5, 7])      # face 3 left out
     np.testing.assert_allclose(merged.view_dir[0], np.array([0, 3, 1]) / np.sqrt(10))
     assert merged.num_faces == 2 and merged.num_views == 2
+
+
+def _problem(faces: int, unresolved: bool, footprint: float | None):
+    obs = Observations(np.arange(faces), np.ones((faces, 3)), np.zeros((faces, 3)), faces, 1,
+                       unresolved=np.ones(faces, bool) if unresolved else None, footprint_pixels=footprint)
+    return SimpleNamespace(obs=obs, all_obs=obs)
+
+
+def test_a_resolved_mesh_clusters_only_beyond_light_faces():
+    assert cluster_count(_problem(5000, False, None), 20_000) == 5000        # every face its own
+    assert cluster_count(_problem(50_000, False, None), 20_000) == 20_000
+
+
+@pytest.mark.parametrize("footprint", [1.0, 1.35, 3.0])
+def test_a_mesh_denser_than_its_photos_clusters_to_resolved_footprints(footprint):
+    """Each cluster's rows average RESOLVED_PIXELS pixels: 1 pixel per face gives clusters of
+    about 11.7 faces, whatever ``light_faces`` allows."""
+    count = cluster_count(_problem(50_000, True, footprint), 20_000)
+    assert count == int(np.ceil(50_000 * footprint / RESOLVED_PIXELS))
+    assert 50_000 * footprint / count == pytest.approx(RESOLVED_PIXELS, rel=1e-3)
+    assert cluster_count(_problem(50_000, True, footprint), 100) == 100      # the cap still holds
+
+
+def test_resolved_pixels_is_the_patch_half_of_whose_pixels_are_whole():
+    side = np.sqrt(RESOLVED_PIXELS)
+    assert (side - 1) ** 2 == pytest.approx(RESOLVED_PIXELS / 2)
+    assert cluster_count(_problem(1000, True, 2 * RESOLVED_PIXELS), 20_000) == 1000   # faces already resolved

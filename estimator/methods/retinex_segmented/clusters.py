@@ -1,8 +1,9 @@
-"""``retinex-segmented`` on a mesh with more observed faces than ``light_faces``: a dense scan,
-or a problem too large to hold its rows (:attr:`Prepared.streamed`).
+"""``retinex-segmented`` on a mesh with more observed faces than ``light_faces`` or denser than
+its photos (a dense scan), or a problem too large to hold its rows (:attr:`Prepared.streamed`).
 
 The light, its sun, the coat's reflection and whether the faces form uniform regions are found
-on a problem of ``light_faces`` clusters of neighbouring faces (:func:`face_clusters`), whose
+on a problem of at most ``light_faces`` clusters of neighbouring faces (:func:`face_clusters`,
+:func:`cluster_count`), whose
 rows are held: each cluster shows its faces' mean colour per view and touches the clusters its
 faces touch, so the edges and regions it sees span the whole object at the scale of a mesh of
 that many faces, however dense the mesh (neighbouring faces of a dense mesh see too little of
@@ -28,6 +29,10 @@ from .result import to_estimate
 from .shading import divide_shade, in_unit_dc
 from .values import FitContext, LightSource, ReflectionFits, Solution
 
+# a compact patch of A pixels (a square of side s) holds about (s - 1)^2 pixels wholly inside it;
+# those pure pixels are at least half of its pixels from s = 1 / (1 - 1 / sqrt 2): A ~ 11.7
+RESOLVED_PIXELS = (1.0 / (1.0 - 0.5 ** 0.5)) ** 2
+
 # what the estimate of the whole mesh keeps from the clustered problem's: how its light was chosen
 CARRIED = ("hypotheses", "coat_weight", "coat_costs", "coat_degree", "reflection_explained", "lobe_explained")
 
@@ -49,6 +54,20 @@ def face_clusters(mesh, observed: np.ndarray, count: int, seed: int = 0) -> tupl
     return cluster, representative
 
 
+def cluster_count(prep: Prepared, light_faces: int) -> int:
+    """How many clusters the light is found on: at most ``light_faces``, and on a mesh denser
+    than its photos (:attr:`Observations.unresolved`) few enough that a cluster's rows average
+    :data:`RESOLVED_PIXELS` pixels each, as a face the images resolve does (half of them pure):
+    a footprint of a few pixels mixes its neighbours and the segmentation sees noise where a
+    region is uniform. Every observed face is its own cluster when the count reaches theirs."""
+    observed = int(prep.obs.observed_faces().sum())
+    count = min(light_faces, observed)
+    pixels = prep.all_obs.footprint_pixels
+    if prep.all_obs.unresolved is not None and pixels:
+        count = min(count, max(1, int(np.ceil(observed * pixels / RESOLVED_PIXELS))))
+    return count
+
+
 def carried(config) -> str | None:
     """The setting that is not carried from clusters to faces (``coat_per_region``: a coat per
     region of the clusters; ``reflected_lobe``: the lobe's diffuse radiance), or None."""
@@ -65,7 +84,7 @@ def solve_on_clusters(method, prep: Prepared) -> Estimate:
         raise InputError(f"{setting} is not carried from the clusters a streamed problem's light is found on to "
                          f"its faces: set {setting}=false, or raise dense_rows so that the rows are held")
     cluster, representative = face_clusters(prep.data.mesh, np.nonzero(prep.obs.observed_faces())[0],
-                                            c.light_faces)
+                                            cluster_count(prep, c.light_faces))
     method.log(f"the light from {len(representative)} clusters of faces")
     part = method.solve_held(prep.clustered(cluster, representative), keep_regions=False)
     est = extend(method, prep, part)

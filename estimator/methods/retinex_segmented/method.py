@@ -13,7 +13,7 @@ from ...core.settings import Section
 from ...light import coat, indirect, sun
 from ...model.estimate import Estimate
 from ..base import Method, register_method
-from .clusters import carried, solve_on_clusters
+from .clusters import carried, cluster_count, solve_on_clusters
 from .decision import choose, light_hypotheses, prediction_cost
 from .result import to_estimate
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
@@ -109,7 +109,7 @@ class RetinexSegmented(Method):
         if c.components == "specular":
             raise InputError("retinex-segmented estimates the diffuse albedo from shading; for specular-only "
                              "data (components='specular') use bilinear-per-face")
-        if prep.streamed or (prep.obs.observed_faces().sum() > c.light_faces and not carried(c)):
+        if prep.streamed or (cluster_count(prep, c.light_faces) < prep.obs.observed_faces().sum() and not carried(c)):
             return solve_on_clusters(self, prep)
         return self.solve_held(prep).estimate
 
