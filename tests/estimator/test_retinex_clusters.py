@@ -2,10 +2,9 @@
 and the observations merged per cluster and view (:meth:`Observations.merged`)."""
 from __future__ import annotations
 
-import numpy as np
-
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from estimator.methods.retinex_segmented.clusters import RESOLVED_PIXELS, cluster_count, face_clusters
