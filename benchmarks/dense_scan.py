@@ -1,19 +1,20 @@
-"""The default method on a mesh denser than its photos: random-family draws on the Stanford
-bunny, the bunny subdivided until a face covers about a pixel, one fresh process per estimate
-so each peak RSS is that case's own.
+"""The default method on a mesh denser than its photos: random-family draws with their mesh
+subdivided until a face covers about a pixel, one fresh process per estimate so each peak RSS
+is that case's own.
 
     python benchmarks/dense_scan.py [--seeds 1047,1029,1006] [--subdivisions 2] [--views 30]
                                     [--resolution N] [--out DIR] [--set KEY=VALUE ...]
 
-Each seed must draw the bunny (:func:`harness.scene.random_family.draw`); its light,
-material, albedo and camera layout are kept, the mesh is the shipped 3,674-face bunny
-subdivided ``--subdivisions`` times (midpoints: 4^s x 3,674 faces; 2 gives 58,784, about one
-pixel each at 256²), seen from ``--views`` cameras (``--resolution``: their width and height
-instead of the draw's, e.g. 1024 to score the same scene at 4x the resolution). Prints per
-seed: faces, the faces seen through pixel centres only (``info["unresolved_faces"]``), the
-estimated share, of all faces and of the faces some pixel centre hits, diffuse PSNR after a
-per-channel least-squares scale, the share within ±10 %, ARI on uniform regions, time per
-stage and peak RSS. Rows go to DIR/dense_scan.json.
+Each seed's light, material, albedo and camera layout are kept
+(:func:`harness.scene.random_family.draw`); its mesh is subdivided ``--subdivisions`` times
+(4^s x the faces): the shipped bunny (3,674 faces) or teapot by midpoints (the bunny twice:
+58,784 faces, about one pixel each at 256²), the bumpy blob generated at ``4 + s``
+subdivisions (the same surface, 5,120 x 4^s faces). It is seen from ``--views`` cameras
+(``--resolution``: their width and height instead of the draw's, e.g. 1024 to score the same
+scene at 4x the resolution). Prints per seed: faces, the faces seen through pixel centres only
+(``info["unresolved_faces"]``), the estimated share, of all faces and of the faces some pixel
+centre hits, diffuse PSNR after a per-channel least-squares scale, the share within ±10 %,
+ARI on uniform regions, time per stage and peak RSS. Rows go to DIR/dense_scan.json.
 """
 from __future__ import annotations
 
@@ -55,13 +56,14 @@ print(json.dumps({{"faces": ds.data.mesh.num_faces, "method": method, **score(ds
 """
 
 
-def dense_bunny(folder: str, subdivisions: int) -> str:
-    """The shipped bunny subdivided ``subdivisions`` times (face order: trimesh's), written once."""
+def dense_mesh(folder: str, name: str, subdivisions: int) -> str:
+    """The shipped mesh ``name`` (bunny, teapot) subdivided ``subdivisions`` times (face
+    order: trimesh's), written once."""
     import trimesh
 
-    path = os.path.join(folder, f"bunny-s{subdivisions}.ply")
+    path = os.path.join(folder, f"{name}-s{subdivisions}.ply")
     if not os.path.exists(path):
-        mesh = trimesh.load(os.path.join(ROOT, "scenes", "assets", "bunny.ply"), process=False)
+        mesh = trimesh.load(os.path.join(ROOT, "scenes", "assets", f"{name}.ply"), process=False)
         vertices, faces = mesh.vertices, mesh.faces
         for _ in range(subdivisions):
             vertices, faces = trimesh.remesh.subdivide(vertices, faces)
@@ -83,16 +85,17 @@ def main() -> None:
     from harness.scene.random_family import draw, random_spec
 
     out = os.path.abspath(args.out)
-    mesh = dense_bunny(out, args.subdivisions)
     rows = []
     for seed in seeds(args.seeds):
-        strata = draw(seed)[1]
-        if strata["geometry"] != "bunny":
-            raise SystemExit(f"seed {seed} draws the {strata['geometry']}, not the bunny: pick another seed")
+        raw, strata = draw(seed)
         size = "" if args.resolution is None else f"-{args.resolution}px"
         folder = os.path.join(out, f"dense-s{args.subdivisions}-{seed:04d}{size}")
         if not os.path.isdir(folder):
-            overrides = {"geometry.file": mesh, "cameras.count": args.views}
+            overrides = {"cameras.count": args.views}
+            if strata["geometry"] == "blob":
+                overrides["geometry.subdivisions"] = raw["geometry"]["subdivisions"] + args.subdivisions
+            else:
+                overrides["geometry.file"] = dense_mesh(out, strata["geometry"], args.subdivisions)
             if args.resolution is not None:
                 overrides.update({"cameras.width": args.resolution, "cameras.height": args.resolution})
             generate(random_spec(seed, None, overrides), folder)
@@ -105,8 +108,9 @@ def main() -> None:
         rows.append(row)
         t = row["timings"]
         ari = "-" if row["ari"] is None or strata["albedo"] != "regions" else f"{row['ari']:.3f}"
-        print(f"{seed:5d} {strata['light']:>8s} {strata['material']:>12s} {strata['albedo']:>8s} "
-              f"{strata['cameras']:>9s}  {row['faces']} faces, {row['unresolved_faces']} through pixel centres; "
+        print(f"{seed:5d} {strata['geometry']:>6s} {strata['light']:>8s} {strata['material']:>12s} "
+              f"{strata['albedo']:>8s} {strata['cameras']:>9s}  {row['faces']} faces, "
+              f"{row['unresolved_faces']} through pixel centres; "
               f"estimated {row['estimated_share']:.3f} ({row['estimated_of_seen']:.3f} of the seen)  "
               f"PSNR {row['psnr']:6.2f} dB  ±10% {row['within_10']:.3f}  "
               f"ARI {ari}  {t['total']:.1f} s (shared {t['observations'] + t['visibility'] + t['reflection']:.1f}, "

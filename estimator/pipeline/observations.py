@@ -139,10 +139,10 @@ def _check_exposure_levels(views: list[View], levels: np.ndarray) -> None:
 
 
 def _face_means(ids: np.ndarray, valid: np.ndarray, rgb: np.ndarray, num_faces: int, min_pixels: int,
-                skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The faces (K,) int64 covered by at least ``min_pixels`` of the ``valid`` pixels in the
     face-ID buffer ``ids`` (P,) (and not in ``skip`` (F,) bool), with the mean colour (K, 3)
-    of ``rgb`` (P, 3) over those pixels."""
+    of ``rgb`` (P, 3) over those pixels and their number (K,)."""
     keep = valid & (ids >= 0)
     ids, colours = ids[keep], rgb[keep].astype(np.float64)
     counts = np.bincount(ids, minlength=num_faces)
@@ -151,7 +151,7 @@ def _face_means(ids: np.ndarray, valid: np.ndarray, rgb: np.ndarray, num_faces: 
     if skip is not None:
         use &= ~skip
     faces = np.nonzero(use)[0]
-    return faces, sums[faces] / counts[faces, None]
+    return faces, sums[faces] / counts[faces, None], counts[faces]
 
 
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = ObservationConfig.min_pixels,
@@ -204,13 +204,14 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     parts, footprint_pixels = [], 0
     for index, (view, ids, valid, row) in enumerate(zip(views, centre_ids, usable, pure_rows)):
         if footprint.any():   # the footprint rows, and the pure rows (none without pure_pixels)
-            faces, means = _face_means(ids.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels, skip=~footprint)
-            footprint_pixels += int(np.bincount(ids.ravel()[valid], minlength=f)[faces].sum())
+            faces, means, pixels = _face_means(ids.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels,
+                                               skip=~footprint)
+            footprint_pixels += int(pixels.sum())
             if row is not None:
                 order = np.argsort(np.concatenate([row[0], faces]), kind="stable")
                 faces, means = np.concatenate([row[0], faces])[order], np.concatenate([row[1], means])[order]
         else:
-            faces, means = row
+            faces, means, _ = row
         to_cam = view.camera.center[None] - mesh.centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         parts.append((faces, means, to_cam, np.full(len(faces), index)))
