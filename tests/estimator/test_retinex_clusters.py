@@ -1,5 +1,6 @@
-"""The clusters of faces ``retinex-segmented`` finds its light on beyond ``light_faces`` (:func:`face_clusters`),
-and the observations merged per cluster and view (:meth:`Observations.merged`)."""
+"""The clusters of faces ``retinex-segmented`` finds its light on beyond ``light_faces`` or on a mesh
+denser than its photos (:func:`face_clusters`, :func:`cluster_count`), and the observations merged per
+cluster and view (:meth:`Observations.merged`)."""
 from __future__ import annotations
 
 from types import SimpleNamespace
