@@ -63,21 +63,21 @@ def _problem(faces: int, unresolved: bool, footprint: float | None):
 
 
 def test_a_resolved_mesh_clusters_only_beyond_light_faces():
-    assert cluster_count(_problem(5000, False, None), 20_000) == 5000        # every face its own
-    assert cluster_count(_problem(50_000, False, None), 20_000) == 20_000
+    assert cluster_count(_problem(5000, False, None), 20_000, 5000) == 5000        # every face its own
+    assert cluster_count(_problem(50_000, False, None), 20_000, 50_000) == 20_000
 
 
 @pytest.mark.parametrize("footprint", [1.0, 1.35, 3.0])
 def test_a_mesh_denser_than_its_photos_clusters_to_resolved_footprints(footprint):
     """Each cluster's rows average RESOLVED_PIXELS pixels: 1 pixel per face gives clusters of
     about 11.7 faces, whatever ``light_faces`` allows."""
-    count = cluster_count(_problem(50_000, True, footprint), 20_000)
+    count = cluster_count(_problem(50_000, True, footprint), 20_000, 50_000)
     assert count == int(np.ceil(50_000 * footprint / RESOLVED_PIXELS))
     assert 50_000 * footprint / count == pytest.approx(RESOLVED_PIXELS, rel=1e-3)
-    assert cluster_count(_problem(50_000, True, footprint), 100) == 100      # the cap still holds
+    assert cluster_count(_problem(50_000, True, footprint), 100, 50_000) == 100      # the cap still holds
 
 
 def test_resolved_pixels_is_the_patch_half_of_whose_pixels_are_whole():
     side = np.sqrt(RESOLVED_PIXELS)
     assert (side - 1) ** 2 == pytest.approx(RESOLVED_PIXELS / 2)
-    assert cluster_count(_problem(1000, True, 2 * RESOLVED_PIXELS), 20_000) == 1000   # faces already resolved
+    assert cluster_count(_problem(1000, True, 2 * RESOLVED_PIXELS), 20_000, 1000) == 1000   # faces already resolved

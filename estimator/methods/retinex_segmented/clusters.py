@@ -54,13 +54,13 @@ def face_clusters(mesh, observed: np.ndarray, count: int, seed: int = 0) -> tupl
     return cluster, representative
 
 
-def cluster_count(prep: Prepared, light_faces: int) -> int:
+def cluster_count(prep: Prepared, light_faces: int, observed: int) -> int:
     """How many clusters the light is found on: at most ``light_faces``, and on a mesh denser
     than its photos (:attr:`Observations.unresolved`) few enough that a cluster's rows average
     :data:`RESOLVED_PIXELS` pixels each, as a face the images resolve does (half of them pure):
     a footprint of a few pixels mixes its neighbours and the segmentation sees noise where a
-    region is uniform. Every observed face is its own cluster when the count reaches theirs."""
-    observed = int(prep.obs.observed_faces().sum())
+    region is uniform. Every observed face is its own cluster when the count reaches theirs
+    (``observed``: how many faces have a kept row)."""
     count = min(light_faces, observed)
     pixels = prep.all_obs.footprint_pixels
     if prep.all_obs.unresolved is not None and pixels:
@@ -74,17 +74,16 @@ def carried(config) -> str | None:
     return next((name for name in ("coat_per_region", "reflected_lobe") if getattr(config, name)), None)
 
 
-def solve_on_clusters(method, prep: Prepared) -> Estimate:
-    """The estimate of ``method`` (a :class:`RetinexSegmented`): its held solve on
-    ``config.light_faces`` clusters of faces (:meth:`Prepared.clustered`), then :func:`extend`
-    to every face; refused with a setting :func:`carried` names."""
+def solve_on_clusters(method, prep: Prepared, observed: np.ndarray, count: int) -> Estimate:
+    """The estimate of ``method`` (a :class:`RetinexSegmented`): its held solve on ``count``
+    clusters (:func:`cluster_count`) of the ``observed`` faces (K,) (:meth:`Prepared.clustered`),
+    then :func:`extend` to every face; refused with a setting :func:`carried` names."""
     c = method.config
     setting = carried(c)
     if setting:
         raise InputError(f"{setting} is not carried from the clusters a streamed problem's light is found on to "
                          f"its faces: set {setting}=false, or raise dense_rows so that the rows are held")
-    cluster, representative = face_clusters(prep.data.mesh, np.nonzero(prep.obs.observed_faces())[0],
-                                            cluster_count(prep, c.light_faces))
+    cluster, representative = face_clusters(prep.data.mesh, observed, count)
     method.log(f"the light from {len(representative)} clusters of faces")
     part = method.solve_held(prep.clustered(cluster, representative), keep_regions=False)
     est = extend(method, prep, part)

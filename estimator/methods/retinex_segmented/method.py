@@ -109,8 +109,10 @@ class RetinexSegmented(Method):
         if c.components == "specular":
             raise InputError("retinex-segmented estimates the diffuse albedo from shading; for specular-only "
                              "data (components='specular') use bilinear-per-face")
-        if prep.streamed or (cluster_count(prep, c.light_faces) < prep.obs.observed_faces().sum() and not carried(c)):
-            return solve_on_clusters(self, prep)
+        observed = np.nonzero(prep.obs.observed_faces())[0]
+        count = cluster_count(prep, c.light_faces, len(observed))
+        if prep.streamed or (count < len(observed) and not carried(c)):
+            return solve_on_clusters(self, prep, observed, count)
         return self.solve_held(prep).estimate
 
     def solve_held(self, prep, keep_regions: bool = True) -> Solution:
