@@ -2,7 +2,7 @@
 # The GPU check: one prepared script for a machine with an NVIDIA GPU, run from the
 # repository root. In about five minutes it
 #   1. runs the test suite with PSEUDOLIGHT_VARIANT=cuda_ad_rgb (stopped after $TEST_BUDGET s;
-#      the log says how far it got);
+#      verbose, so a log cut at the budget still names each test passed or failed);
 #   2. generates and estimates shipped scenes at full size on llvm_ad_rgb and on cuda_ad_rgb,
 #      on the same machine, and tabulates the times (generation wall-clock; the estimate's
 #      own stage timings from run.json). Where llvm_ad_rgb cannot start (no libLLVM >= 16,
@@ -53,10 +53,11 @@ if ! "$PY" -c "import mitsuba as mi; mi.set_variant('$VARIANT')" 2>>"$OUT/gpu.tx
 fi
 
 echo "== 1. test suite on $VARIANT (budget ${TEST_BUDGET} s)"
-PSEUDOLIGHT_VARIANT=$VARIANT timeout -k 10 "$TEST_BUDGET" "$PY" -m pytest -q -p no:cacheprovider $PYTEST_ARGS tests \
+PSEUDOLIGHT_VARIANT=$VARIANT timeout -k 10 "$TEST_BUDGET" "$PY" -m pytest -o addopts= -v -p no:cacheprovider $PYTEST_ARGS tests \
     >"$OUT/tests.log" 2>&1
 rc=$?
-tail -n 3 "$OUT/tests.log"
+echo "$(grep -c ' PASSED' "$OUT/tests.log") passed, $(grep -c ' FAILED' "$OUT/tests.log") failed before the end or the budget"
+grep ' FAILED' "$OUT/tests.log" | grep -o 'tests/[^ ]*' | sort -u | head -n 20
 case $rc in
     0) echo "tests: passed" ;;
     124|137) echo "tests: stopped at the budget (see $OUT/tests.log for how far they got)" ;;
