@@ -43,6 +43,9 @@ def make_baseline(metrics: dict) -> dict:
             "tolerances": {k: {"better": TRACKED[k][0], "tolerance": TRACKED[k][1]} for k in values}}
 
 
+DATASET_SIZE_KEYS = ("faces", "views", "width", "height")   # a baseline's dataset_size (made by the report)
+
+
 def validate_baseline(baseline, source: str = "baseline") -> dict:
     """Check a baseline's structure; raises InputError naming ``source`` and the metric."""
     if not isinstance(baseline, dict) or not isinstance(baseline.get("metrics"), dict):
@@ -50,6 +53,11 @@ def validate_baseline(baseline, source: str = "baseline") -> dict:
     tolerances = baseline.get("tolerances", {})
     if not isinstance(tolerances, dict):
         raise InputError(f"{source}: 'tolerances' must be a table")
+    size = baseline.get("dataset_size")
+    if size is not None and not (isinstance(size, dict) and all(
+            isinstance(size.get(k), int) and not isinstance(size.get(k), bool) for k in DATASET_SIZE_KEYS)):
+        raise InputError(f"{source}: dataset_size must be a table of integers {', '.join(DATASET_SIZE_KEYS)}, "
+                         f"got {size!r}")
     for path, value in baseline["metrics"].items():
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise InputError(f"{source}: metrics.{path} must be a finite number, got {value!r}")

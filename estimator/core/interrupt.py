@@ -8,6 +8,10 @@ and each step of a long loop calls :func:`raise_if_stop_requested`, which raises
 """
 from __future__ import annotations
 
+import signal
+import threading
+from contextlib import contextmanager
+
 _REQUESTED = [False]
 
 
@@ -29,3 +33,29 @@ def raise_if_stop_requested() -> None:
     """Raise :class:`StopRequested` when a stop was requested."""
     if _REQUESTED[0]:
         raise StopRequested()
+
+
+@contextmanager
+def signals_deferred():
+    """Hold SIGINT and SIGTERM back while the block runs, then deliver the first that came.
+
+    For native imports (Dr.Jit's, Mitsuba's variants): an exception raised by a signal handler
+    midway through one leaves the extension half set up, and the process then crashes (a
+    segmentation fault, or an abort at exit) instead of unwinding. Only the main thread
+    receives signals, so elsewhere the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+
+    def hold(signum, frame):
+        pending.append(signum)
+
+    previous = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    if pending:
+        signal.raise_signal(pending[0])

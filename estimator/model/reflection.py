@@ -55,7 +55,7 @@ def fresnel_dielectric(cos_theta: np.ndarray, ior: float) -> np.ndarray:
     """(N,) unpolarised Fresnel reflectance of a dielectric of index ``ior`` (from air) at
     incidence cosines (N,) (clamped to (0, 1])."""
     c = np.clip(cos_theta, 1e-6, 1.0)
-    t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / ior ** 2, 0.0))
+    t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) * (1.0 / ior) ** 2, 0.0))   # 1/ior first: no overflow
     rs = (c - ior * t) / (c + ior * t)
     rp = (ior * c - t) / (ior * c + t)
     return 0.5 * (rs * rs + rp * rp)

@@ -15,6 +15,7 @@ import re
 from dataclasses import dataclass
 
 from ..core.errors import InputError
+from ..core.interrupt import signals_deferred
 from ..core.settings import Section
 
 MIN_LLVM = 16
@@ -138,9 +139,10 @@ def set_variant(variant: str | None = None):
         raise BackendError("variant cuda_ad_rgb asked for, but no CUDA GPU is usable here; use llvm_ad_rgb")
     if resolved.startswith("llvm"):
         _prepare_llvm()
-    import mitsuba as mi
+    with signals_deferred():   # Ctrl-C inside Dr.Jit's native import would crash the process
+        import mitsuba as mi
 
-    mi.set_variant(resolved)
+        mi.set_variant(resolved)
     _chosen = resolved
     return mi
 

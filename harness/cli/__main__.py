@@ -1,5 +1,5 @@
 import sys
 
-from harness.cli.main import main
+from harness.cli.entry import run
 
-sys.exit(main())
+sys.exit(run())

@@ -44,6 +44,15 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+_SIGINT_SEEN = [False]
+
+
+def _on_sigint(signum, frame):
+    _SIGINT_SEEN[0] = True
+    request_stop()   # as for SIGTERM: a library that catches BaseException (trimesh's optional imports,
+    raise KeyboardInterrupt   # a Dr.Jit callback) cannot swallow the stop
+
+
 def _interruption(exc: BaseException) -> type | None:
     """Terminated or KeyboardInterrupt when ``exc`` is one or was caused by one (Dr.Jit
     wraps exceptions raised inside its kernels' Python callbacks in a RuntimeError)."""
@@ -90,6 +99,8 @@ def _dotted_value(item: str) -> tuple[str, object]:
     key, sep, text = item.partition("=")
     if not sep or not key.strip():
         raise InputError(f"--set needs KEY=VALUE, got {item!r}")
+    if "\n" in item or "\r" in item:   # TOML would read the next line as another key, and it would be dropped
+        raise InputError(f"--set takes one KEY=VALUE on one line, got {item!r}")
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
@@ -808,14 +819,15 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a bad flag (2, one line already printed)
         return int(exc.code or 0)
-    _SIGTERM_SEEN[0] = False
+    _SIGTERM_SEEN[0] = _SIGINT_SEEN[0] = False
     clear_stop()
     keep_freed_memory()
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    previous_int = signal.signal(signal.SIGINT, _on_sigint)
     try:
         return args.func(args)
     except BaseException as exc:
-        kind = Terminated if _SIGTERM_SEEN[0] else _interruption(exc)
+        kind = Terminated if _SIGTERM_SEEN[0] else KeyboardInterrupt if _SIGINT_SEEN[0] else _interruption(exc)
         if kind is Terminated:
             print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
             return 143
@@ -828,6 +840,7 @@ def main(argv: list[str] | None = None) -> int:
         raise
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
 
 
 if __name__ == "__main__":

@@ -161,8 +161,8 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
     values = {}
     for key in _INTRINSIC_KEYS:
         value = frame.get(key, top.get(key))
-        if key in ("fl_y",) and value is None:
-            value = frame.get("fl_x", top.get("fl_x"))
+        if key == "fl_y" and value is None:   # square pixels: fl_x as given or derived from camera_angle_x
+            value = values.get("fl_x")
         if key == "fl_x" and value is None:
             angle = frame.get("camera_angle_x", top.get("camera_angle_x"))
             w = frame.get("w", top.get("w"))
@@ -358,7 +358,10 @@ def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: 
     mesh_path = os.path.join(folder, mesh_name)
     if not os.path.isfile(mesh_path):
         raise DatasetError(f"{folder} has no mesh ({os.path.basename(mesh_path)} not found)")
-    declared = polygon_count(mesh_path)
+    try:
+        declared = polygon_count(mesh_path)
+    except OSError as exc:
+        raise DatasetError(f"{mesh_path}: cannot read the mesh ({exc.strerror or exc})") from None
     try:
         mesh = load_mesh_file(mesh_path)
     except InputError as exc:

@@ -141,6 +141,9 @@ def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check pe
     for key, kind in (("method", str), ("parameters", dict), ("dataset", str)):
         if not isinstance(run.get(key), kind) or (kind is str and not run[key]):
             raise RunError(f"{js}: '{key}' missing or not a {kind.__name__}")
+    warnings = run.get("warnings", [])
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        raise RunError(f"{js}: 'warnings' must be a list of strings, got {str(warnings)[:60]!r}")
     try:
         with np.load(npz, allow_pickle=False) as archive:
             data = {k: archive[k] for k in archive.files}

@@ -10,6 +10,8 @@ from estimator.rays.visibility import Visibility, sphere_sampling
 
 def test_fresnel_limits():
     np.testing.assert_allclose(fresnel_dielectric(np.array([1.0]), 1.5), ((1.5 - 1) / 2.5) ** 2, rtol=1e-12)
+    # an index far beyond any dielectric (a user's setting) reflects everything and does not overflow
+    np.testing.assert_allclose(fresnel_dielectric(np.array([1.0, 0.5, 1e-6]), 1e200), 1.0, rtol=1e-12)
     assert fresnel_dielectric(np.array([1e-6]), 1.5)[0] > 0.999          # grazing: a mirror
     f = fresnel_dielectric(np.linspace(1, 0.01, 50), 1.5)
     assert np.all(np.diff(f) > 0)                                         # rises towards grazing

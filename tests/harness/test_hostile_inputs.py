@@ -332,6 +332,8 @@ def test_degenerate_mesh_and_flags(copy, tmp_path, capsys):
                  "--rotate-illumination", inputs=[run], absent=[tmp_path / "p"])
     expect_error(capsys, ["generate", MICRO, "-o", tmp_path / "g", "--resolution", "0"], "--resolution", ">= 1",
                  absent=[tmp_path / "g"])
+    expect_error(capsys, ["generate", MICRO, "-o", tmp_path / "g", "--set", "seed=3\nrender.spp=5"], "--set",
+                 "one line", absent=[tmp_path / "g"])
 
 
 def test_filesystem_errors_are_one_line(copy, tmp_path, capsys, monkeypatch):
@@ -783,3 +785,76 @@ def test_a_bad_flag_value_is_refused_naming_the_flag(copy, tmp_path, capsys):
                  absent=[tmp_path / "x"])
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--sh-order", "99"],
                  "--sh-order: estimator config: sh_order must lie in", inputs=[ds], absent=[tmp_path / "x"])
+
+
+def test_baseline_dataset_size_and_run_warnings_are_checked(copy, tmp_path, capsys):
+    """A baseline's dataset_size must be a table of integers, a run's warnings a list of strings."""
+    ds, run, rep = copy
+    out = tmp_path / "rep2"
+    bad = tmp_path / "baseline.json"
+    metrics = json.load(open(rep / "metrics.json"))
+    from reports.regression import make_baseline
+    for size in ("big", {"faces": "many", "views": 6, "width": 24, "height": 24}):
+        bad.write_text(json.dumps({**make_baseline(metrics), "dataset_size": size}))
+        expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba", "--baseline", bad], str(bad), "dataset_size",
+                     inputs=[run, ds, bad], absent=[out])
+    meta = json.load(open(run / "run.json"))
+    meta["warnings"] = 5
+    json.dump(meta, open(run / "run.json", "w"))
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "run.json", "'warnings'",
+                 inputs=[run, ds], absent=[out])
+
+
+def test_an_unreadable_mesh_is_one_line(copy, tmp_path, capsys, monkeypatch):
+    """The mesh's header is read before the mesh: an OSError there names the file."""
+    ds, _, _ = copy
+    import harness.io.dataset as dataset
+
+    def denied(path):
+        raise PermissionError(13, "Permission denied", str(path))
+    monkeypatch.setattr(dataset, "polygon_count", denied)
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "o"], "mesh.ply", "Permission denied", inputs=[ds],
+                 absent=[tmp_path / "o"])
+
+
+def test_fl_y_defaults_to_the_fl_x_derived_from_the_field_of_view(copy):
+    """With neither focal length given, both come from camera_angle_x (square pixels)."""
+    ds, _, _ = copy
+    from harness.io.dataset import read_dataset
+    meta = json.load(open(ds / "transforms.json"))
+    want = read_dataset(str(ds)).data.views[0].camera
+    for key in ("fl_x", "fl_y"):
+        meta.pop(key, None)
+        for frame in meta["frames"]:
+            frame.pop(key, None)
+    meta["camera_angle_x"] = float(2 * np.arctan(0.5 * want.width / want.fx))
+    json.dump(meta, open(ds / "transforms.json", "w"))
+    got = read_dataset(str(ds)).data.views[0].camera
+    np.testing.assert_allclose([got.fx, got.fy], [want.fx, want.fx], rtol=1e-9)
+
+
+INTERRUPT_DURING_IMPORT = """
+import importlib.abc, os, signal, sys
+class Interrupt(importlib.abc.MetaPathFinder):   # Ctrl-C as trimesh's optional imports run
+    def find_spec(self, name, path, target=None):
+        if name == "trimesh.path":
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+sys.meta_path.insert(0, Interrupt())
+from harness.cli.entry import run
+sys.exit(run(sys.argv[1:]))
+"""
+
+
+def test_ctrl_c_while_the_command_line_imports_is_honoured(micro, tmp_path):
+    """trimesh catches BaseException around its optional imports; the entry point's handler still
+    ends the command with 130 and writes nothing (the signal is sent at a fixed import, not a time)."""
+    ds = micro[0]
+    out = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-c", INTERRUPT_DURING_IMPORT, "estimate", str(ds), "-o", str(out)],
+                          capture_output=True, text=True, timeout=300,
+                          cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
+    assert proc.returncode == 130, proc.stderr
+    assert "interrupted; no partial output" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists() and not [n for n in os.listdir(tmp_path) if "-partial-" in n]
