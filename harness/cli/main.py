@@ -420,6 +420,8 @@ def cmd_estimate(args) -> int:
     if "robust_loss" in flags and method == "mitsuba-ad":
         raise InputError("--robust-loss applies to the bilinear and retinex methods; mitsuba-ad fits the images "
                          "by gradient descent on an L2 loss")
+    if args.truth and not get_method(method).needs_illumination:
+        raise InputError(f"--truth applies to the methods given the true light (known-illumination), not to {method}")
     known = _known_light(args, ds, method) if get_method(method).needs_illumination else {}
     if args.holdout_views:
         from estimator import holdout_indices

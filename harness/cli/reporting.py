@@ -166,6 +166,21 @@ def find_metrics(folder: str) -> str:
     raise RunError(f"{folder} has no metrics.json (nor report/metrics.json): run `pseudolight report` first")
 
 
+def check_metrics_format(metrics, path: str) -> dict:
+    """``metrics`` as read from ``path``, refused (:class:`RunError`) when it is not a report's
+    metrics table or was written by a newer pseudolight (another schema version)."""
+    from reports.evaluate import SCHEMA, SCHEMA_VERSION
+
+    if not isinstance(metrics, dict):
+        raise RunError(f"{path}: not a report's metrics (a JSON object is expected)")
+    if metrics.get("schema", SCHEMA) != SCHEMA:
+        raise RunError(f"{path}: schema {metrics['schema']!r} is not {SCHEMA!r}")
+    version = metrics.get("schema_version", SCHEMA_VERSION)
+    if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= SCHEMA_VERSION:
+        raise RunError(f"{path}: schema_version {version!r} is not one this pseudolight reads (1 to {SCHEMA_VERSION})")
+    return metrics
+
+
 def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False,
                  tags: list[dict] | None = None) -> list[dict]:
     """compare.json + compare.html over several reports (methods x scenes); ``tags``: per
@@ -173,7 +188,7 @@ def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False,
     entries, rows = [], []
     for folder, tag in zip(folders, tags or [None] * len(folders)):
         path = find_metrics(folder)
-        metrics = load_json(path, "report metrics", RunError)
+        metrics = check_metrics_format(load_json(path, "report metrics", RunError), path)
         ratios_path = os.path.join(os.path.dirname(path), "ratios.npz")
         try:
             with np.load(ratios_path, allow_pickle=False) as archive:

@@ -147,9 +147,11 @@ def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check pe
     try:
         with np.load(npz, allow_pickle=False) as archive:
             data = {k: archive[k] for k in archive.files}
+    except (PermissionError, IsADirectoryError) as exc:
+        raise RunError(f"{npz}: cannot read it ({exc.strerror})") from None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile):   # a truncated archive is a BadZipFile
         raise RunError(f"{npz}: unreadable (not a .npz archive)") from None
-    pseudo_key = "pseudo_sh" if "pseudo_sh" in data else "sh"  # run format 1 named it sh
+    pseudo_key = "sh" if "sh" in data and "pseudo_sh" not in data else "pseudo_sh"   # run format 1 named it sh
     for key in ("diffuse", "specular", pseudo_key, "labels", "observed"):
         if key not in data:
             raise RunError(f"{npz}: key '{key}' missing")

@@ -280,6 +280,10 @@ def test_malformed_baseline_metrics_and_run_json(copy, tmp_path, capsys):
                  inputs=[run, ds, bad], absent=[out])
     (rep / "metrics.json").write_text("[1, 2")
     expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", "not valid JSON", inputs=[rep], absent=[out])
+    for text, needle in (("[1, 2]", "JSON object"), ('{"schema_version": 99}', "schema_version 99"),
+                         ('{"schema": "other"}', "schema 'other'")):
+        (rep / "metrics.json").write_text(text)
+        expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", needle, inputs=[rep], absent=[out])
     (run / "run.json").write_text("NaN")
     expect_error(capsys, ["render", run, "-o", out], "run.json", inputs=[run, ds], absent=[out])
 
@@ -747,6 +751,9 @@ def test_known_light_from_another_scene_is_refused(copy, tmp_path, capsys):
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--method", "known-illumination", "--truth", other],
                  "is a dataset of scene 'another-scene'", "the known light must be this scene's",
                  inputs=[ds, other], absent=[tmp_path / "r"])
+    # a method that is not given the light has no use for it: the flag is a mistake, not ignored
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--truth", tmp_path / "nowhere"], "--truth",
+                 "known-illumination", inputs=[ds], absent=[tmp_path / "r"])
 
 
 def test_import_warns_about_a_black_or_one_colour_albedo_and_no_light(copy, tmp_path, capsys):
@@ -798,6 +805,11 @@ def test_baseline_dataset_size_and_run_warnings_are_checked(copy, tmp_path, caps
         bad.write_text(json.dumps({**make_baseline(metrics), "dataset_size": size}))
         expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba", "--baseline", bad], str(bad), "dataset_size",
                      inputs=[run, ds, bad], absent=[out])
+    archive = dict(np.load(run / "estimate.npz"))
+    np.savez(run / "estimate.npz", **{k: v for k, v in archive.items() if k != "pseudo_sh"})
+    expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "estimate.npz", "'pseudo_sh' missing",
+                 inputs=[run, ds], absent=[out])
+    np.savez(run / "estimate.npz", **archive)
     meta = json.load(open(run / "run.json"))
     meta["warnings"] = 5
     json.dump(meta, open(run / "run.json", "w"))
