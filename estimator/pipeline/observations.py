@@ -221,6 +221,9 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
                          f"{', '.join(clear[:5])}{' ...' if len(clear) > 5 else ''}; check their alpha channel "
                          "or drop them from the dataset")
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
+    if len(blind) == len(views) and hit.any():
+        raise InputError(f"no face covers min_pixels={min_pixels} pixels in any view, although pixel centres hit "
+                         f"{int(hit.sum())} faces: lower min_pixels")
     if len(blind) == len(views):
         raise InputError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
     if blind:

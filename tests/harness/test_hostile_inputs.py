@@ -870,3 +870,10 @@ def test_ctrl_c_while_the_command_line_imports_is_honoured(micro, tmp_path):
     assert proc.returncode == 130, proc.stderr
     assert "interrupted; no partial output" in proc.stderr and "Traceback" not in proc.stderr
     assert not out.exists() and not [n for n in os.listdir(tmp_path) if "-partial-" in n]
+
+
+def test_a_min_pixels_no_face_reaches_names_the_setting(copy, tmp_path, capsys):
+    """Faces hit by pixel centres, none with min_pixels of them: the setting is named, not the poses."""
+    ds, _, _ = copy
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--set", "min_pixels=1000000"], "min_pixels=1000000",
+                 "lower min_pixels", inputs=[ds], absent=[tmp_path / "r"])
