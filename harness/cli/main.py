@@ -48,9 +48,11 @@ _SIGINT_SEEN = [False]
 
 
 def _on_sigint(signum, frame):
+    """Ctrl-C: as for SIGTERM, the stop is also requested, so that a library which catches
+    BaseException (trimesh's optional imports, a Dr.Jit callback) cannot swallow it."""
     _SIGINT_SEEN[0] = True
-    request_stop()   # as for SIGTERM: a library that catches BaseException (trimesh's optional imports,
-    raise KeyboardInterrupt   # a Dr.Jit callback) cannot swallow the stop
+    request_stop()
+    raise KeyboardInterrupt
 
 
 def _interruption(exc: BaseException) -> type | None:
