@@ -21,6 +21,11 @@ def load_mesh_with_uv(path: str | os.PathLike) -> tuple[TriangleMesh, np.ndarray
         raise InputError(f"mesh file not found: {path}")
     try:
         loaded = trimesh.load(path, process=False, force="mesh")
+    except ModuleNotFoundError as exc:
+        if exc.name in ("charset_normalizer", "chardet"):   # trimesh's guess at a text's encoding, when not UTF-8
+            raise InputError(f"cannot read mesh file {path}: its text is not UTF-8 (a binary or corrupted file?)") \
+                from None
+        raise InputError(f"cannot read mesh file {path}: its format needs the module {exc.name}") from None
     except Exception as exc:
         raise InputError(f"cannot read mesh file {path}: {exc}") from exc
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))

@@ -877,3 +877,15 @@ def test_a_min_pixels_no_face_reaches_names_the_setting(copy, tmp_path, capsys):
     ds, _, _ = copy
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--set", "min_pixels=1000000"], "min_pixels=1000000",
                  "lower min_pixels", inputs=[ds], absent=[tmp_path / "r"])
+
+
+def test_a_binary_obj_is_a_one_line_error(tmp_path):
+    """Random bytes named .obj: an InputError naming the file, whatever trimesh's optional
+    encoding modules (missing, trimesh asks for charset_normalizer)."""
+    from estimator import InputError
+    from harness.io.mesh import load_mesh_file
+
+    path = tmp_path / "mesh.obj"
+    path.write_bytes(np.random.default_rng(0).integers(0, 256, 3000, dtype=np.uint8).tobytes())
+    with pytest.raises(InputError, match=r"cannot read mesh file .*mesh\.obj"):
+        load_mesh_file(path)
