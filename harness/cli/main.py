@@ -34,25 +34,19 @@ class Terminated(BaseException):
     """SIGTERM arrived: unwind like Ctrl-C, so atomic outputs are cleaned up."""
 
 
-_SIGTERM_SEEN = [False]   # set by the handler: Mitsuba's parser turns a Terminated raised inside a
-                          # Python plugin's constructor into a RuntimeError with no cause to follow
+# the interruption a handler raised (Terminated or KeyboardInterrupt), recorded because Mitsuba's
+# parser turns one raised inside a Python plugin's constructor into a RuntimeError with no cause
+# to follow, and a library that catches BaseException (trimesh's optional imports) swallows it
+_SIGNAL_SEEN: list[type | None] = [None]
 
 
-def _on_sigterm(signum, frame):
-    _SIGTERM_SEEN[0] = True
-    request_stop()   # honoured at the next step of a loop whose Dr.Jit callback swallowed the exception
-    raise Terminated()
-
-
-_SIGINT_SEEN = [False]
-
-
-def _on_sigint(signum, frame):
-    """Ctrl-C: as for SIGTERM, the stop is also requested, so that a library which catches
-    BaseException (trimesh's optional imports, a Dr.Jit callback) cannot swallow it."""
-    _SIGINT_SEEN[0] = True
+def _on_signal(signum, frame):
+    """SIGTERM or SIGINT: record it, request a stop (honoured at the next step of a loop whose
+    Dr.Jit callback swallowed the exception) and unwind."""
+    kind = Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+    _SIGNAL_SEEN[0] = kind
     request_stop()
-    raise KeyboardInterrupt
+    raise kind()
 
 
 def _interruption(exc: BaseException) -> type | None:
@@ -823,15 +817,14 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a bad flag (2, one line already printed)
         return int(exc.code or 0)
-    _SIGTERM_SEEN[0] = _SIGINT_SEEN[0] = False
+    _SIGNAL_SEEN[0] = None
     clear_stop()
     keep_freed_memory()
-    previous = signal.signal(signal.SIGTERM, _on_sigterm)
-    previous_int = signal.signal(signal.SIGINT, _on_sigint)
+    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
         return args.func(args)
     except BaseException as exc:
-        kind = Terminated if _SIGTERM_SEEN[0] else KeyboardInterrupt if _SIGINT_SEEN[0] else _interruption(exc)
+        kind = _SIGNAL_SEEN[0] or _interruption(exc)
         if kind is Terminated:
             print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
             return 143
@@ -843,8 +836,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         raise
     finally:
-        signal.signal(signal.SIGTERM, previous)
-        signal.signal(signal.SIGINT, previous_int)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 if __name__ == "__main__":
