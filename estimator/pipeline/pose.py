@@ -229,19 +229,22 @@ def _align(observed: np.ndarray, factor: int, template: np.ndarray, points_world
 
 
 def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales: tuple[float, ...],
-            steps: int, free: np.ndarray) -> tuple[Camera, dict]:
+            steps: int, free: np.ndarray, estimated: np.ndarray | None = None) -> tuple[Camera, dict]:
     """One view's camera aligned from coarse to fine: the ``predicted`` image (H, W, 3) of
     the view at its camera and the silhouette against the image and its alpha, or the
-    silhouette alone (``predicted`` None)."""
+    silhouette alone (``predicted`` None). ``estimated`` (F,) bool: the faces whose predicted
+    radiance is known; pixels on the others are not aligned (their prediction is black)."""
     cam = view.camera
     info = {"pixels": 0, "cost": [0.0, 0.0]}
     alpha = silhouette(view)
     # the surface points and their predicted radiance, at the starting pose: a pose error of a
     # few pixels barely changes what a point looks like, only where it lands
     face, surface = caster.pixel_hits(cam)
+    coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
+    if estimated is not None:   # a face without an estimate has no predicted radiance to align with
+        face = np.where(estimated[np.maximum(face, 0)], face, -1)
     if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predicted is None and alpha is None):
         return cam, info
-    coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
     if predicted is None:
         predicted, seen = coverage, alpha[..., None]
     else:
@@ -285,7 +288,8 @@ def refine_view(view: View, predictor: Predictor, scales: tuple[float, ...] = PO
     camera : the refined Camera (the input one when too few pixels are covered).
     info : dict with 'pixels' used and 'cost' (robust cost before and after, finest level).
     """
-    return _refine(view, predictor.caster, predictor.predict(view.camera)[0], scales, steps, np.ones(6, dtype=bool))
+    return _refine(view, predictor.caster, predictor.predict(view.camera)[0], scales, steps, np.ones(6, dtype=bool),
+                   predictor.estimate.observed)
 
 
 def centre_view(view: View, caster: RayCaster, scales: tuple[float, ...] = SILHOUETTE_SCALES,
