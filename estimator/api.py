@@ -60,15 +60,18 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
             rounds = pose.POSE_ROUNDS
             if log:
                 log(f"a view's outline is {np.nanmax(offsets):.1f} px off its alpha: refining the poses")
+    last: list[Estimate] = []   # the pose refinement's last held-out estimate: where the final solve starts
     if rounds > 0:
         fixed = replace(config, pose_rounds=0, auto_pose=0.0)
-        data, poses = pose.refine_poses(
-            data, lambda d, prior: _fit(d, cls, fixed, known_sh, known_radiance, None, exponent_candidates, caster,
-                                        prior)[0],
-            rounds, min(config.pose_folds, len(data.views)), caster, log)
+
+        def held_out(d: MultiViewData, prior: Estimate | None) -> Estimate:
+            last[:] = [_fit(d, cls, fixed, known_sh, known_radiance, None, exponent_candidates, caster, prior)[0]]
+            return last[0]
+
+        data, poses = pose.refine_poses(data, held_out, rounds, min(config.pose_folds, len(data.views)), caster, log)
     pose_seconds = time.perf_counter() - t0
     est, prep, gains, solve_seconds = _fit(data, cls, config, known_sh, known_radiance, log, exponent_candidates,
-                                           caster)
+                                           caster, last[0] if last else None)
     t = time.perf_counter()
     est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
     if gains is not None:
