@@ -98,13 +98,18 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         f"{data.views[int(np.nanargmax(offsets))].name} lay {np.nanmax(offsets):.1f} px from the mesh's "
         f"(auto_pose {config.auto_pose:g} px); the corrected cameras are in 'poses'"]
     unaligned = [p["name"] for p in poses or [] if p["unaligned_rounds"]]
+    undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + [
         f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]] + ([
         f"pose refinement: {len(unaligned)} view(s) were not aligned in some round, the other views determining no "
         f"estimate ({', '.join(unaligned[:5])}{' ...' if len(unaligned) > 5 else ''}; 'unaligned_rounds' in "
-        "'poses'): raise pose_folds, so that each held-out estimate has more views"] if unaligned else [])
+        "'poses'): raise pose_folds, so that each held-out estimate has more views"] if unaligned else []) + ([
+        f"pose refinement: the alignment of {len(undone)} view(s) moved their alpha outline more than "
+        f"{pose.POSE_OUTLINE_TOLERANCE:g} px off the mesh's, so it was undone and they keep their silhouette-aligned "
+        f"pose ({', '.join(undone[:5])}{' ...' if len(undone) > 5 else ''}; 'outline_reverted' in 'poses'): the "
+        "estimate predicts these views poorly"] if undone else [])
     return est
 
 
