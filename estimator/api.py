@@ -106,10 +106,10 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         f"pose refinement: {len(unaligned)} view(s) were not aligned in some round, the other views determining no "
         f"estimate ({', '.join(unaligned[:5])}{' ...' if len(unaligned) > 5 else ''}; 'unaligned_rounds' in "
         "'poses'): raise pose_folds, so that each held-out estimate has more views"] if unaligned else []) + ([
-        f"pose refinement: the alignment of {len(undone)} view(s) moved their alpha outline more than "
-        f"{pose.POSE_OUTLINE_TOLERANCE:g} px off the mesh's, so it was undone and they keep their silhouette-aligned "
-        f"pose ({', '.join(undone[:5])}{' ...' if len(undone) > 5 else ''}; 'outline_reverted' in 'poses'): the "
-        "estimate predicts these views poorly"] if undone else [])
+        f"pose refinement: the last alignment of {len(undone)} view(s) moved their alpha outline more than "
+        f"{pose.POSE_OUTLINE_TOLERANCE:g} px off the mesh's, and farther than before, so it was undone and they keep "
+        f"their pose from before it ({', '.join(undone[:5])}{' ...' if len(undone) > 5 else ''}; 'outline_reverted' "
+        "in 'poses'): the estimate predicts these views poorly"] if undone else [])
     return est
 
 

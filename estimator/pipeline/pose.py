@@ -244,6 +244,7 @@ def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales:
     # the surface points and their predicted radiance, at the starting pose: a pose error of a
     # few pixels barely changes what a point looks like, only where it lands
     face, surface = caster.pixel_hits(cam)
+    # the silhouette channel is the whole mesh's, taken before unestimated faces are dropped
     coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
     if estimated is not None:   # a face without an estimate has no predicted radiance to align with
         face = np.where(estimated[np.maximum(face, 0)], face, -1)
@@ -377,11 +378,11 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
 
     A view whose correction grows beyond :func:`plausible` goes back to its silhouette-only
     pose, or to its given pose when that too is beyond it (and is marked 'diverged'): it was
-    pulled by a poor estimate, not by its pixels. So does, after each round, a view whose
-    alpha outline the round left more than :data:`POSE_OUTLINE_TOLERANCE` pixels from the
-    mesh's, and farther than at its silhouette pose (:func:`outline_offsets`): the alpha does
-    not depend on the estimate, so it vetoes an alignment that a wrong prediction (a
-    misestimated light on the views from below, say) pulled off. Its 'pixels' and 'cost' then
+    pulled by a poor estimate, not by its pixels. After each round, a view whose alpha
+    outline the round left more than :data:`POSE_OUTLINE_TOLERANCE` pixels from the mesh's,
+    and farther than before the round (:func:`outline_offsets`), returns to its pose before
+    the round: the alpha does not depend on the estimate, so it vetoes an alignment that a
+    poor prediction of the view pulled off. Its 'pixels' and 'cost' then
     describe the alignment that was thrown away. Where the views outside a group determine no estimate
     (``solve`` raises :class:`InputError`: a singular solve from too few views), that group's
     views keep their poses for the round ('unaligned_rounds' counts such rounds).
@@ -392,8 +393,8 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
     info : one dict per view: 'name', 'rotation_deg' and 'translation' (world units) of the
         correction, 'c2w' (4x4 list), 'diverged' (bool), 'unaligned_rounds' (int),
         'outline_reverted' (bool: the last round's alignment was undone by the outline
-        check), 'outline_px' (the final pose's outline offset, None without alpha), 'pixels'
-        and 'cost' of the last alignment.
+        check, the view keeping its pose from before that round), 'outline_px' (the final
+        pose's outline offset, None without alpha), 'pixels' and 'cost' of the last alignment.
     """
     n = len(data.views)
     if n < 2:
@@ -411,8 +412,8 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
         cam = centre_view(v, caster)
         centred.append(dataclasses.replace(v, camera=cam if plausible(v.camera, cam, centre) else v.camera))
     views, diverged = list(centred), [False] * n
-    silhouette_offsets = outline_offsets(dataclasses.replace(data, views=centred), caster)   # NaN without alpha
-    offsets, reverted = silhouette_offsets, np.zeros(n, dtype=bool)
+    offsets = outline_offsets(dataclasses.replace(data, views=centred), caster)   # NaN without alpha
+    reverted = np.zeros(n, dtype=bool)
     last = [{"pixels": 0, "cost": [0.0, 0.0]}] * n
     if n - -(-n // folds) < POSE_MIN_VIEWS:
         rounds = 0
@@ -422,6 +423,7 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
     estimates: list[Estimate | None] = [None] * folds
     unaligned = [0] * n
     for r in range(rounds):
+        start, start_offsets = list(views), offsets   # where the outline check returns a view to
         for k in range(folds):
             held = [i for i in range(n) if i % folds == k]
             try:
@@ -441,15 +443,16 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
                 diverged[i] = not plausible(data.views[i].camera, cam, centre)
                 views[i] = centred[i] if diverged[i] else dataclasses.replace(views[i], camera=cam)
         offsets = outline_offsets(dataclasses.replace(data, views=views), caster)
-        # NaN (no alpha) compares False: such a view keeps its alignment
-        reverted = offsets > np.maximum(POSE_OUTLINE_TOLERANCE, silhouette_offsets)
+        # NaN (no alpha) compares False: such a view keeps its alignment; a diverged one is
+        # already back at its silhouette pose
+        reverted = (offsets > np.maximum(POSE_OUTLINE_TOLERANCE, start_offsets)) & ~np.array(diverged)
         for i in np.nonzero(reverted)[0]:
-            views[i], offsets[i] = centred[i], silhouette_offsets[i]
+            views[i], offsets[i] = start[i], start_offsets[i]
         if log:
             moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
             log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg; "
-                f"{int(reverted.sum())} view(s) back at their silhouette pose (the alignment moved their outline "
-                f"beyond {POSE_OUTLINE_TOLERANCE:g} px)")
+                f"{int(reverted.sum())} view(s) back at their pose before the round (the alignment moved their "
+                f"outline beyond {POSE_OUTLINE_TOLERANCE:g} px, and farther than it was)")
     info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), "diverged": bad,
              "unaligned_rounds": skipped, "outline_reverted": bool(undone),
              "outline_px": None if np.isnan(offset) else float(offset), **extra}

@@ -153,21 +153,20 @@ class _GroupedRows:
 
 
 def _lm_channel(r, group, num_groups, c_rows, d_rows, alb, h, components, iterations, tol, residuals, norm,
-                schedule=LM_SCHEDULE, grouped: _GroupedRows | None = None):
+                schedule, grouped: _GroupedRows):
     """Levenberg-Marquardt on one channel, albedos eliminated by their Schur complement.
 
     alb : (G, P) albedos of the unknown components; h : (M,) light. ``schedule``: (start,
-    raise, lower, max) damping. ``grouped``: the rows' float32 layout (built here when None).
+    raise, lower, max) damping. ``grouped``: the rows' float32 layout, shared by the channels.
     Returns refined (alb, h).
     """
     lam, lam_raise, lam_lower, lam_max = schedule
     rows = _component_rows(components, c_rows, d_rows)
-    if grouped is None:
-        grouped = _GroupedRows.build(group, num_groups, rows)
     order, sorted_group, rows32, members = grouped.order, grouped.group, grouped.rows, grouped.members
     # the (N, M) Jacobian (sorted by group) is refilled in place every step: a fresh array of
     # this size costs more in page faults than the arithmetic that fills it
-    jac, scratch = np.empty(c_rows.shape, dtype=np.float32), np.empty(c_rows.shape, dtype=np.float32)
+    jac = np.empty(c_rows.shape, dtype=np.float32)
+    scratch = np.empty(c_rows.shape, dtype=np.float32) if len(rows) > 1 else None
 
     def model(alb_, h_):
         feats = np.stack([x @ h_ for x in rows], 1)                           # (N, P)

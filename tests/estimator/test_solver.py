@@ -37,6 +37,9 @@ def test_noise_free_bilinear_problem_is_solved_exactly(components, shuffled):
     np.testing.assert_allclose(res.diffuse, td, atol=1e-10)
     np.testing.assert_allclose(res.specular, ts, atol=1e-10)
     assert res.residuals[-1] < 1e-10 and res.residuals[-1] <= res.residuals[0]
+    # a normal matrix whose rows and albedos are out of step still reaches the optimum
+    # (the gradient is exact), only slowly: measured 4-17 steps, 29-50 on shuffled rows with such a mismatch
+    assert max(len(r) for r in res.lm_residuals) <= 20
 
 
 def test_known_illumination_is_one_linear_solve():
