@@ -232,12 +232,31 @@ def _align(observed: np.ndarray, factor: int, template: np.ndarray, points_world
     return cam, first, current
 
 
+def _fill_unestimated(predicted: np.ndarray, known: np.ndarray, mesh: np.ndarray, sigma: float) -> np.ndarray:
+    """``predicted`` (H, W, C) with its mesh pixels that have no estimate (``mesh`` (H, W, 1)
+    bool and not ``known`` (H, W, 1) bool) set to the Gaussian-weighted mean (``sigma``
+    pixels) of the known pixels around them (normalised convolution). Left black, they would
+    darken their known neighbours once the image is blurred, where the observed image is not
+    dark; ``sigma`` is the widest level's, as far as its blur carries them. Pixels with no known
+    one within reach stay as they are."""
+    unknown = mesh & ~known
+    if not unknown.any():
+        return predicted
+    weights = known.astype(np.float32)
+    spread = gaussian_filter(weights, (sigma, sigma, 0), mode="constant")
+    reach = spread > 1e-3
+    mean = gaussian_filter(predicted * weights, (sigma, sigma, 0), mode="constant") / np.where(reach, spread, 1.0)
+    return np.where(unknown & reach, mean, predicted).astype(np.float32)
+
+
 def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales: tuple[float, ...],
             steps: int, free: np.ndarray, estimated: np.ndarray | None = None) -> tuple[Camera, dict]:
     """One view's camera aligned from coarse to fine: the ``predicted`` image (H, W, 3) of
     the view at its camera and the silhouette against the image and its alpha, or the
     silhouette alone (``predicted`` None). ``estimated`` (F,) bool: the faces whose predicted
-    radiance is known; pixels on the others are not aligned (their prediction is black)."""
+    radiance is known; pixels on the others are not aligned (their prediction is black), and
+    their prediction is filled from the known pixels around them before the blur
+    (:func:`_fill_unestimated`)."""
     cam = view.camera
     info = {"pixels": 0, "cost": [0.0, 0.0]}
     alpha = silhouette(view)
@@ -253,6 +272,7 @@ def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales:
     if predicted is None:
         predicted, seen = coverage, alpha[..., None]
     else:
+        predicted = _fill_unestimated(predicted, (face >= 0).reshape(coverage.shape), coverage > 0, max(scales))
         seen = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
         if alpha is not None:   # the silhouette as one more channel, at the colours' level
             level = float(np.median(np.linalg.norm(predicted.reshape(-1, 3)[face >= 0], axis=1)))
