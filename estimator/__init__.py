@@ -13,7 +13,7 @@ from .core.camera import Camera, gl_to_mitsuba, look_at, mitsuba_sensor, mitsuba
 from .core.data import MultiViewData, TriangleMesh, View
 from .core.errors import InputError
 from .core.gauge import unit_dc
-from .core.interrupt import StopRequested, clear_stop, request_stop
+from .core.interrupt import StopRequested, clear_stop, request_stop, stop_signals_handled
 from .core.psnr import PSNR_CAP_DB, psnr_db
 from .core.sh import axis_angle_matrix, fibonacci_sphere
 from .diagnostics.trust import warnings_for
@@ -33,6 +33,7 @@ __all__ = [
     "StopRequested",
     "clear_stop",
     "request_stop",
+    "stop_signals_handled",
     "COMPONENTS",
     "DEFAULT_METHOD",
     "DIFFUSE_LIGHTS",

@@ -36,6 +36,18 @@ def raise_if_stop_requested() -> None:
 
 
 @contextmanager
+def stop_signals_handled(handler):
+    """SIGINT and SIGTERM handled by ``handler`` (signum, frame) while the block runs, the
+    previous handlers restored after it (main thread only: no other thread can set them)."""
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, old in previous.items():
+            signal.signal(s, old)
+
+
+@contextmanager
 def signals_deferred():
     """Hold SIGINT and SIGTERM back while the block runs, then deliver the first that came.
 
@@ -47,15 +59,7 @@ def signals_deferred():
         yield
         return
     pending: list[int] = []
-
-    def hold(signum, frame):
-        pending.append(signum)
-
-    previous = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with stop_signals_handled(lambda signum, frame: pending.append(signum)):
         yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
     if pending:
         signal.raise_signal(pending[0])

@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from estimator import VARIANTS, InputError, StopRequested, clear_stop, request_stop
+from estimator import VARIANTS, InputError, StopRequested, clear_stop, request_stop, stop_signals_handled
 from harness.cli.heap import keep_freed_memory
 from harness.io.atomic import OutputError, check_output, refuse_inputs
 from harness.io.jsonio import load_json
@@ -820,24 +820,21 @@ def main(argv: list[str] | None = None) -> int:
     _SIGNAL_SEEN[0] = None
     clear_stop()
     keep_freed_memory()
-    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
-    try:
-        return args.func(args)
-    except BaseException as exc:
-        kind = _SIGNAL_SEEN[0] or _interruption(exc)
-        if kind is Terminated:
-            print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
-            return 143
-        if kind is KeyboardInterrupt:
-            print("pseudolight: interrupted; no partial output was left", file=sys.stderr)
-            return 130
-        if isinstance(exc, InputError):
-            print(f"pseudolight: error: {exc}", file=sys.stderr)
-            return 2
-        raise
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+    with stop_signals_handled(_on_signal):
+        try:
+            return args.func(args)
+        except BaseException as exc:
+            kind = _SIGNAL_SEEN[0] or _interruption(exc)
+            if kind is Terminated:
+                print("pseudolight: terminated (SIGTERM); no partial output was left", file=sys.stderr)
+                return 143
+            if kind is KeyboardInterrupt:
+                print("pseudolight: interrupted; no partial output was left", file=sys.stderr)
+                return 130
+            if isinstance(exc, InputError):
+                print(f"pseudolight: error: {exc}", file=sys.stderr)
+                return 2
+            raise
 
 
 if __name__ == "__main__":
