@@ -93,7 +93,7 @@ class BilinearSegmented(BilinearClustered):
         for _ in range(c.recluster_rounds):
             albedo, usable = self._face_albedo(prep, face_group, result, seen)
             labels, _ = segment(np.where(usable[:, None], albedo, 1.0), edges, usable,
-                                c.segment_threshold, c.uniform_spread)
+                                c.segment_threshold, c.uniform_spread, bridges=prep.blends_albedos)
             new_group = assign_to_regions(labels, albedo, seen, edges, 2.5 * c.segment_threshold)
             new_in_solve = seen & (new_group < int(labels.max()) + 1)  # faces of uniform regions carry the light
             history.append(int(labels.max()) + 1)

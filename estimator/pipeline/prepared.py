@@ -83,6 +83,7 @@ class Prepared:
     d_rows: np.ndarray
     timings: dict = field(default_factory=dict)
     adjacency: np.ndarray | None = None   # (E, 2) a clustered problem's adjacent faces (None: the mesh's)
+    merged_faces: bool = False            # a clustered problem's faces are clusters of several faces
     # the last light's projections (shading, gloss): a streamed problem's cost one full pass over
     # the rows each, and the solve and the trust diagnostics ask for the same light
     _projections: dict = field(default_factory=dict, init=False, repr=False, compare=False)
@@ -91,6 +92,15 @@ class Prepared:
     def streamed(self) -> bool:
         """True when the reflection rows are computed on demand instead of held."""
         return self.d_rows is None
+
+    @property
+    def blends_albedos(self) -> bool:
+        """True when a face's colour may blend its neighbours' albedos: the faces are clusters of
+        several faces (:meth:`clustered`), or faces smaller than the pixels that see them
+        (observed through their pixel centres, :attr:`Observations.unresolved`). A face on a
+        boundary then shows a colour between the two sides' (the segmentation leaves such
+        bridges out: :func:`estimator.solvers.segmentation.segment`)."""
+        return self.merged_faces or self.all_obs.unresolved is not None
 
     @property
     def c_rows(self) -> np.ndarray:
@@ -169,7 +179,8 @@ class Prepared:
         left out); its diffuse row is its faces' area-weighted mean row (the merged colour's
         shading), its other geometry (normal, shadow function, specular rows, the rays of a
         sun or of the light the object reflects) that of the face ``representative[k]`` (K,).
-        Clusters are adjacent where two of their faces are (:attr:`edges`). The caster traces
+        Clusters are adjacent where two of their faces are (:attr:`edges`); where a cluster holds
+        several faces, its colour may blend albedos (:attr:`blends_albedos`). The caster traces
         the whole mesh (:class:`~estimator.rays.raycast.ClusterCaster`): every face casts its
         shadow."""
         whole = self.data.mesh
@@ -180,11 +191,13 @@ class Prepared:
         visibility = Visibility(self.visibility.bits[representative], self.visibility.num_directions)
         mirror = mirror_directions(mesh.face_normals[obs.face], obs.view_dir)
         pairs = cluster[whole.face_adjacency]
+        sizes = np.bincount(cluster[cluster >= 0], minlength=count)
         pairs = np.sort(pairs[np.all(pairs >= 0, axis=1) & (pairs[:, 0] != pairs[:, 1])], axis=1)
         return replace(self, data=replace(self.data, mesh=mesh), caster=ClusterCaster(self.caster, cluster, mesh),
                        visibility=visibility, all_obs=all_obs, obs=obs, c_matrix=self._mean_rows(cluster, count, areas),
                        d_rows=self.model.specular_rows(obs.face, mirror, self.sampling, visibility),
-                       adjacency=np.unique(pairs, axis=0), timings=dict(self.timings))
+                       adjacency=np.unique(pairs, axis=0), merged_faces=bool(sizes.max(initial=0) > 1),
+                       timings=dict(self.timings))
 
     def _mean_rows(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> np.ndarray:
         """(count, M) the ``weight``-weighted mean diffuse row of each cluster's faces, in

@@ -49,18 +49,28 @@ def albedo_features(albedo: np.ndarray) -> np.ndarray:
 def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
             threshold: float = SegmentationConfig.segment_threshold,
             uniform_spread: float = SegmentationConfig.uniform_spread, min_size: int = 10,
-            merge_bandwidth: float = 0.12, merge: str = "mean-shift") -> tuple[np.ndarray, np.ndarray]:
+            merge_bandwidth: float = 0.12, merge: str = "mean-shift",
+            bridges: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Uniform-albedo regions on the face-adjacency graph.
 
     Neighbours whose :func:`albedo_features` differ by less than ``threshold`` (largest
     component) are joined (connected components). A component of at least ``min_size``
     faces whose feature spread (median absolute deviation, largest component) is below
-    ``uniform_spread`` is uniform; uniform components with similar albedo are one region even
-    when apart: with ``merge='mean-shift'`` those a mean shift (``merge_bandwidth``) takes to
-    one mode, which also joins components up to about twice that apart (generous, for a
-    light fit that tests the ties: :func:`split_regions`); with ``merge='complete'`` those
-    whose medians all lie within ``threshold`` of each other in every feature (complete
-    linkage: no chain of small steps), as they would have been joined had they touched.
+    ``uniform_spread`` is uniform. With ``bridges``, a component too wide to be uniform is
+    joined again without its bridges, the faces whose close neighbours differ from each other
+    by ``threshold`` or more (:func:`bridge_faces`), and its parts are tested again: where a
+    face's colour may blend its neighbours' albedos (a cluster of several faces, a face smaller
+    than the pixels that see it) a blend along a boundary lies within ``threshold`` of both
+    sides, and one chain of such blends ties two regions into one component too wide to be
+    uniform. Only the wide components are cut: where noise between neighbours nears the
+    threshold, faces inside a uniform region have close neighbours that far apart too.
+
+    Uniform components with similar albedo are one region even when apart: with
+    ``merge='mean-shift'`` those a mean shift (``merge_bandwidth``) takes to one mode, which
+    also joins components up to about twice that apart (generous, for a light fit that tests
+    the ties: :func:`split_regions`); with ``merge='complete'`` those whose medians all lie
+    within ``threshold`` of each other in every feature (complete linkage: no chain of small
+    steps), as they would have been joined had they touched.
 
     Returns
     -------
@@ -71,13 +81,13 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     feat = albedo_features(np.where(valid[:, None], albedo, 1.0))
     e0, e1 = edges[:, 0], edges[:, 1]
     close = valid[e0] & valid[e1] & (np.max(np.abs(feat[e0] - feat[e1]), axis=1) < threshold)
-    graph = sparse.csr_matrix((np.ones(close.sum()), (e0[close], e1[close])), shape=(f, f))
-    _, comp = connected_components(graph, directed=False)
-    ids, inverse, counts = np.unique(comp[valid], return_inverse=True, return_counts=True)
-    values = feat[valid]
-    medians = group_quantile(inverse, values, len(ids), 0.5, interpolate=True)
-    spreads = group_quantile(inverse, np.abs(values - medians[inverse]), len(ids), 0.5, interpolate=True).max(axis=1)
-    uniform = (counts >= min_size) & (spreads < uniform_spread)
+    inverse, medians, uniform, wide = _components(feat, edges[close], valid, min_size, uniform_spread)
+    if bridges and wide.any():
+        in_wide = np.zeros(f, dtype=bool)
+        in_wide[valid] = wide[inverse]
+        cut = bridge_faces(feat, edges[close], threshold) & in_wide
+        close &= ~cut[e0] & ~cut[e1]
+        inverse, medians, uniform, _ = _components(feat, edges[close], valid, min_size, uniform_spread)
     labels = np.full(f, -1, dtype=np.int64)
     if not uniform.any():
         return labels, np.zeros((0, albedo.shape[1]))
@@ -86,7 +96,7 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
                            criterion="distance") - 1) if uniform.sum() > 1 else np.zeros(1, dtype=np.int64)
     else:
         merged, _ = mean_shift(medians[uniform], merge_bandwidth, metric="euclidean")
-    region_of_component = np.full(len(ids), -1)
+    region_of_component = np.full(len(uniform), -1)
     region_of_component[np.nonzero(uniform)[0]] = merged
     labels[valid] = region_of_component[inverse]
     present, compact = np.unique(labels[labels >= 0], return_inverse=True)
@@ -95,16 +105,48 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     return labels, group_quantile(labels[inside], albedo[inside], len(present), 0.5, interpolate=True)
 
 
+def _components(features: np.ndarray, joined: np.ndarray, valid: np.ndarray, min_size: int,
+                uniform_spread: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The connected components of the valid faces under the ``joined`` (E', 2) pairs: each
+    valid face's component (V,) in [0, K), their median ``features`` (K, C), and which are
+    uniform (K,) (at least ``min_size`` faces, spread below ``uniform_spread``) and which too
+    wide to be (K,) (at least ``min_size`` faces, spread at or above it)."""
+    f = len(features)
+    graph = sparse.csr_matrix((np.ones(len(joined)), (joined[:, 0], joined[:, 1])), shape=(f, f))
+    _, comp = connected_components(graph, directed=False)
+    ids, inverse, counts = np.unique(comp[valid], return_inverse=True, return_counts=True)
+    values = features[valid]
+    medians = group_quantile(inverse, values, len(ids), 0.5, interpolate=True)
+    spreads = group_quantile(inverse, np.abs(values - medians[inverse]), len(ids), 0.5, interpolate=True).max(axis=1)
+    large = counts >= min_size
+    return inverse, medians, large & (spreads < uniform_spread), large & (spreads >= uniform_spread)
+
+
+def bridge_faces(features: np.ndarray, close: np.ndarray, threshold: float) -> np.ndarray:
+    """(F,) True for a face whose close neighbours (``close`` (E', 2): the pairs of faces whose
+    ``features`` (F, C) differ by less than ``threshold`` in every feature) differ from each
+    other by ``threshold`` or more in some feature: joined, it would chain them. The widest
+    difference between two of a face's close neighbours is, per feature, the range of their
+    values (the face's own lies within ``threshold`` of each), so one scatter of maxima and
+    minima over the close pairs finds them all."""
+    src, dst = np.concatenate([close[:, 0], close[:, 1]]), np.concatenate([close[:, 1], close[:, 0]])
+    high, low = features.copy(), features.copy()
+    np.maximum.at(high, src, features[dst])
+    np.minimum.at(low, src, features[dst])
+    return np.max(high - low, axis=1) >= threshold
+
+
 def split_regions(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edges: np.ndarray,
-                  threshold: float, uniform_spread: float) -> np.ndarray:
+                  threshold: float, uniform_spread: float, bridges: bool = False) -> np.ndarray:
     """(F,) ``labels`` with each region split where, under ``albedo`` (a light fitted with the
     regions tied), its faces segment (:func:`segment`, complete linkage) into parts more than
     ``threshold`` apart: a generous merge joined two albedos. Faces of a region in no uniform
-    part stay with its largest part; -1 stays -1. Regions are renumbered 0..R'-1."""
+    part stay with its largest part; -1 stays -1. Regions are renumbered 0..R'-1. ``bridges``:
+    as :func:`segment`'s."""
     inside = valid & (labels >= 0)
     if not inside.any():
         return labels.copy()
-    part, _ = segment(albedo, edges, inside, threshold, uniform_spread, merge="complete")
+    part, _ = segment(albedo, edges, inside, threshold, uniform_spread, merge="complete", bridges=bridges)
     r, p = labels[inside], part[inside]
     width = int(p.max()) + 2
     pair = r * width + (p + 1)                  # (region, part); part 0 here: in no uniform part

@@ -3,7 +3,7 @@ import numpy as np
 
 from estimator.core.reductions import group_quantile
 from estimator.methods.segmented import BilinearSegmented
-from estimator.solvers.segmentation import albedo_features, segment, split_regions
+from estimator.solvers.segmentation import albedo_features, bridge_faces, segment, split_regions
 
 from .meshes import sphere
 
@@ -105,3 +105,71 @@ def test_region_ties_follow_the_boundary_ratio():
     tied = BilinearSegmented._tie_regions(start, albedo, np.ones(mesh.num_faces, bool), group,
                                           mesh.face_adjacency, 2)
     np.testing.assert_allclose(tied[1] / tied[0], true[1] / true[0], rtol=0.01)   # the weak anchor: 0.2 % off
+
+
+def _path(levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Grey albedos (n, 3) at log brightness ``levels`` (n,) on a path graph's edges (n - 1, 2)."""
+    n = len(levels)
+    return 0.5 * np.exp(levels)[:, None] * np.ones(3), np.column_stack([np.arange(n - 1), np.arange(1, n)])
+
+
+def test_a_blend_on_a_boundary_is_a_bridge_and_joins_neither_side():
+    """Two regions 0.22 apart in log brightness, one face between them at the blend of both
+    (0.11 from each, within the 0.12 threshold of both): joined, it chains the regions into one
+    component whose spread (0.11) is not uniform, so no region is found; left out as a bridge,
+    both regions are found whole and the blend in neither. A sharp boundary has no bridge."""
+    levels = np.concatenate([np.zeros(20), [-0.11], np.full(20, -0.22)])
+    albedo, edges = _path(levels)
+    valid = np.ones(len(levels), bool)
+    chained, _ = segment(albedo, edges, valid, 0.12, 0.08, merge="complete")
+    assert np.all(chained == -1)
+    parted, _ = segment(albedo, edges, valid, 0.12, 0.08, merge="complete", bridges=True)
+    assert parted[20] == -1 and parted.max() == 1
+    assert len(np.unique(parted[:20])) == 1 and len(np.unique(parted[21:])) == 1 and parted[0] != parted[40]
+    feat = albedo_features(albedo)
+    close = edges[np.max(np.abs(feat[edges[:, 0]] - feat[edges[:, 1]]), axis=1) < 0.12]
+    np.testing.assert_array_equal(np.nonzero(bridge_faces(feat, close, 0.12))[0], [20])
+    sharp, sharp_edges = _path(np.concatenate([np.zeros(20), np.full(20, -0.22)]))
+    feat = albedo_features(sharp)
+    close = sharp_edges[np.max(np.abs(feat[sharp_edges[:, 0]] - feat[sharp_edges[:, 1]]), axis=1) < 0.12]
+    assert not bridge_faces(feat, close, 0.12).any()
+
+
+def test_bridges_leave_noisy_uniform_regions_whole():
+    """On a sphere of two albedos 0.2 apart in log brightness with 1 % noise and a band of
+    blended faces along their boundary (halfway, within the 0.12 threshold of both sides;
+    complete linkage, which keeps the two sides apart), the band chains the two into one
+    component too wide to be uniform; with bridges left out the bridges lie on the band or
+    touch it (noise far below the threshold makes none elsewhere) and both regions are found."""
+    mesh = sphere(4)
+    y = mesh.centroids[:, 1]
+    level = np.where(y > 0, 0.0, -0.2)
+    band = np.abs(y) < 0.02
+    level[band] = -0.1
+    rng = np.random.default_rng(5)
+    albedo = 0.5 * np.exp(level + 0.01 * rng.standard_normal(mesh.num_faces))[:, None] * np.ones(3)
+    valid = np.ones(mesh.num_faces, bool)
+    chained, _ = segment(albedo, mesh.face_adjacency, valid, merge="complete")
+    assert np.mean(chained >= 0) < 0.05
+    labels, _ = segment(albedo, mesh.face_adjacency, valid, merge="complete", bridges=True)
+    assert labels.max() == 1 and np.mean(labels[~band] >= 0) > 0.99
+    assert len(np.unique(labels[(y > 0) & ~band & (labels >= 0)])) == 1
+    feat = albedo_features(albedo)
+    a, b = mesh.face_adjacency.T
+    close = mesh.face_adjacency[np.max(np.abs(feat[a] - feat[b]), axis=1) < 0.12]
+    bridges = bridge_faces(feat, close, 0.12)
+    near = band.copy()                                   # the band and the faces that touch it
+    near[a[band[b]]] = near[b[band[a]]] = True
+    assert bridges[band].mean() > 0.5 and not bridges[~near].any()
+
+
+def test_bridges_cut_only_components_too_wide_to_be_uniform():
+    """Noise near the threshold inside one region: every other face has close neighbours 0.14
+    apart (a bridge by :func:`bridge_faces`), but the component's spread (0.035) is uniform, so
+    nothing is cut and the region stays whole."""
+    levels = np.tile([0.0, 0.07, 0.0, -0.07], 10)
+    albedo, edges = _path(levels)
+    feat = albedo_features(albedo)
+    assert bridge_faces(feat, edges, 0.12)[2::2].all()                     # all but the path's end
+    labels, _ = segment(albedo, edges, np.ones(len(levels), bool), 0.12, 0.08, merge="complete", bridges=True)
+    assert np.all(labels == 0)

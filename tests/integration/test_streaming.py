@@ -138,7 +138,8 @@ def test_the_default_streamed_on_clusters_keeps_its_regions(default_held_and_str
 
 def test_a_clustered_problem_is_one_face_per_cluster(tiny_sparse_data):
     """Clusters of one face reproduce the problem's rows; clusters of two faces merge their
-    observations per view, average their diffuse rows and touch where their faces do."""
+    observations per view, average their diffuse rows and touch where their faces do, and
+    their colours may blend two albedos (:attr:`Prepared.blends_albedos`)."""
     prep = prepare(tiny_sparse_data.data, EstimatorConfig(**SMALL_DEFAULT))
     mesh = prep.data.mesh
     seen = np.nonzero(prep.obs.observed_faces())[0]
@@ -164,6 +165,7 @@ def test_a_clustered_problem_is_one_face_per_cluster(tiny_sparse_data):
     np.testing.assert_allclose(two.c_matrix[pair[first]], areas @ prep.c_matrix[[first, second]] / areas.sum(),
                                rtol=1e-12)
     assert not np.any(np.all(two.edges == pair[first], axis=1))       # no cluster touches itself
+    assert not prep.blends_albedos and not one.blends_albedos and two.blends_albedos
 
 
 @pytest.mark.parametrize("setting", ["coat_per_region", "reflected_lobe"])

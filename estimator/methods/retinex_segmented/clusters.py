@@ -129,9 +129,11 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
     labels, regions, edges = np.full(f, -1, dtype=np.int64), 0, prep.edges
     if h.regions:
         features = in_unit_dc(albedo, h.light)
-        labels, _ = segment(np.where(lit[:, None], features, 1.0), edges, lit, c.segment_threshold, c.uniform_spread)
+        bridges = prep.blends_albedos   # faces smaller than their pixels
+        labels, _ = segment(np.where(lit[:, None], features, 1.0), edges, lit, c.segment_threshold, c.uniform_spread,
+                            bridges=bridges)
         if h.source is LightSource.EDGES_AND_PARTED_REGIONS:
-            labels = split_regions(labels, features, lit, edges, c.segment_threshold, c.uniform_spread)
+            labels = split_regions(labels, features, lit, edges, c.segment_threshold, c.uniform_spread, bridges)
         regions = int(labels.max()) + 1
         joined = assign_to_regions(labels, features, lit, edges, 2.5 * c.segment_threshold)
         labels = np.where(lit & (joined < regions), joined, -1)

@@ -33,7 +33,7 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
         light, _ = edge_fit.log_shading_fit(radiance, shading.columns, ctx.edges, ctx.usable, **ctx.fit)
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
     labels, _ = segment(np.where(lit[:, None], in_unit_dc(albedo, light), 1.0), ctx.edges, lit,
-                        c.segment_threshold, c.uniform_spread)
+                        c.segment_threshold, c.uniform_spread, bridges=prep.blends_albedos)
     hypothesis = Hypothesis(radiance, light, shading, albedo, lit, labels, int(labels.max()) + 1,
                             float(np.mean(labels[lit] >= 0)), LightSource.EDGES, found)
     if hypothesis.regions and hypothesis.share >= c.retinex_min_uniform_share:
@@ -86,7 +86,7 @@ def parted_regions(ctx: FitContext, tied: Hypothesis) -> Hypothesis | None:
     c = ctx.config
     albedo, lit = divide(tied.shading, tied.radiance, tied.light, ctx.usable, ctx.extra)
     labels = split_regions(tied.labels, in_unit_dc(albedo, tied.light), lit, ctx.edges, c.segment_threshold,
-                           c.uniform_spread)
+                           c.uniform_spread, bridges=ctx.prep.blends_albedos)
     regions = int(labels.max()) + 1
     if regions <= tied.regions:
         return None

@@ -50,7 +50,7 @@ def lobe_hypothesis(ctx: FitContext, edges: Hypothesis, fitted: lobe_light.LobeL
     light = at_indirect_scale(ctx, shading, radiance, light)
     albedo, lit = divide(shading, radiance, light, ctx.usable, ctx.extra)
     labels, _ = segment(np.where(lit[:, None], in_unit_dc(albedo, light), 1.0), ctx.edges, lit,
-                        c.segment_threshold, c.uniform_spread)
+                        c.segment_threshold, c.uniform_spread, bridges=ctx.prep.blends_albedos)
     share, regions = float(np.mean(labels[lit] >= 0)), int(labels.max()) + 1
     spread, source = None, LightSource.LOBE
     if regions and share >= c.retinex_min_uniform_share:
