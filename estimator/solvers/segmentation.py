@@ -62,8 +62,10 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     face's colour may blend its neighbours' albedos (a cluster of several faces, a face smaller
     than the pixels that see it) a blend along a boundary lies within ``threshold`` of both
     sides, and one chain of such blends ties two regions into one component too wide to be
-    uniform. Only the wide components are cut: where noise between neighbours nears the
-    threshold, faces inside a uniform region have close neighbours that far apart too.
+    uniform when the two sides are of comparable size (the spread is a median deviation: a
+    small region tied to a large one stays uniform, and stays tied). Only the wide components
+    are cut, once: where noise between neighbours nears the threshold, faces inside a uniform
+    region have close neighbours that far apart too.
 
     Uniform components with similar albedo are one region even when apart: with
     ``merge='mean-shift'`` those a mean shift (``merge_bandwidth``) takes to one mode, which

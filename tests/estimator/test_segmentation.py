@@ -173,3 +173,33 @@ def test_bridges_cut_only_components_too_wide_to_be_uniform():
     assert bridge_faces(feat, edges, 0.12)[2::2].all()                     # all but the path's end
     labels, _ = segment(albedo, edges, np.ones(len(levels), bool), 0.12, 0.08, merge="complete", bridges=True)
     assert np.all(labels == 0)
+
+
+def test_only_the_wide_component_is_cut_among_several_with_invalid_faces():
+    """Two components apart (a gap of 0.5) and an invalid face: the first chains two albedos
+    through a blend and is cut; the second, noisy near the threshold but uniform, keeps its
+    bridges; the invalid face stays outside every region."""
+    chained = np.concatenate([np.zeros(20), [-0.11], np.full(20, -0.22)])
+    noisy = -0.72 + np.tile([0.0, 0.07, 0.0, -0.07], 5)
+    levels = np.concatenate([chained, [5.0], noisy])
+    albedo, edges = _path(levels)
+    valid = np.ones(len(levels), bool)
+    valid[41] = False
+    labels, _ = segment(albedo, edges, valid, 0.12, 0.08, merge="complete", bridges=True)
+    assert labels[20] == -1 and labels[41] == -1
+    assert len({int(labels[0]), int(labels[40]), int(labels[42])}) == 3
+    assert np.all(labels[:20] == labels[0]) and np.all(labels[21:41] == labels[40])
+    assert np.all(labels[42:] == labels[42])
+
+
+def test_faces_blend_albedos_in_clusters_of_several_or_when_smaller_than_pixels():
+    """:attr:`Prepared.blends_albedos` turns the bridge rule on for clustered problems whose
+    clusters hold several faces and for faces observed through their pixel centres only."""
+    from types import SimpleNamespace
+
+    from estimator.pipeline.prepared import Prepared
+    blends = Prepared.blends_albedos.fget
+    resolved, unresolved = SimpleNamespace(unresolved=None), SimpleNamespace(unresolved=np.ones(4, bool))
+    assert not blends(SimpleNamespace(merged_faces=False, all_obs=resolved))
+    assert blends(SimpleNamespace(merged_faces=True, all_obs=resolved))
+    assert blends(SimpleNamespace(merged_faces=False, all_obs=unresolved))
