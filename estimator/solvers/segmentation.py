@@ -56,16 +56,16 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     Neighbours whose :func:`albedo_features` differ by less than ``threshold`` (largest
     component) are joined (connected components). A component of at least ``min_size``
     faces whose feature spread (median absolute deviation, largest component) is below
-    ``uniform_spread`` is uniform. With ``bridges``, a component too wide to be uniform is
-    joined again without its bridges, the faces whose close neighbours differ from each other
-    by ``threshold`` or more (:func:`bridge_faces`), and its parts are tested again: where a
-    face's colour may blend its neighbours' albedos (a cluster of several faces, a face smaller
-    than the pixels that see it) a blend along a boundary lies within ``threshold`` of both
-    sides, and one chain of such blends ties two regions into one component too wide to be
-    uniform when the two sides are of comparable size (the spread is a median deviation: a
-    small region tied to a large one stays uniform, and stays tied). Only the wide components
-    are cut, once: where noise between neighbours nears the threshold, faces inside a uniform
-    region have close neighbours that far apart too.
+    ``uniform_spread`` is uniform. With ``bridges``, a component is cut at its bridges, the
+    faces whose close neighbours differ from each other by ``threshold`` or more
+    (:func:`bridge_faces`), where that leaves two parts of at least ``min_size`` faces whose
+    medians differ by ``threshold`` or more (:func:`_parted`): where a face's colour may blend
+    its neighbours' albedos (a cluster of several faces, a face smaller than the pixels that
+    see it) a blend along a boundary lies within ``threshold`` of both sides, and one chain of
+    such blends ties two regions into one component (too wide to be uniform, or, a small
+    region tied to a large one, uniform by the median spread and wrong). A component whose
+    parts agree stays whole: where noise between neighbours nears the threshold, faces inside
+    one region have close neighbours that far apart too. The cut is made once.
 
     Uniform components with similar albedo are one region even when apart: with
     ``merge='mean-shift'`` those a mean shift (``merge_bandwidth``) takes to one mode, which
@@ -83,13 +83,16 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     feat = albedo_features(np.where(valid[:, None], albedo, 1.0))
     e0, e1 = edges[:, 0], edges[:, 1]
     close = valid[e0] & valid[e1] & (np.max(np.abs(feat[e0] - feat[e1]), axis=1) < threshold)
-    inverse, medians, uniform, wide = _components(feat, edges[close], valid, min_size, uniform_spread)
-    if bridges and wide.any():
-        in_wide = np.zeros(f, dtype=bool)
-        in_wide[valid] = wide[inverse]
-        cut = bridge_faces(feat, edges[close], threshold) & in_wide
-        close &= ~cut[e0] & ~cut[e1]
-        inverse, medians, uniform, _ = _components(feat, edges[close], valid, min_size, uniform_spread)
+    inverse, medians, uniform, _ = _components(feat, edges[close], valid, min_size, uniform_spread)
+    if bridges:
+        bridge = bridge_faces(feat, edges[close], threshold)
+        in_parted = np.zeros(f, dtype=bool)
+        in_parted[valid] = _parted(feat, edges[close & ~bridge[e0] & ~bridge[e1]], valid, inverse, len(uniform),
+                                   threshold, min_size, uniform_spread)[inverse]
+        cut = bridge & in_parted
+        if cut.any():
+            close &= ~cut[e0] & ~cut[e1]
+            inverse, medians, uniform, _ = _components(feat, edges[close], valid, min_size, uniform_spread)
     labels = np.full(f, -1, dtype=np.int64)
     if not uniform.any():
         return labels, np.zeros((0, albedo.shape[1]))
@@ -110,9 +113,9 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
 def _components(features: np.ndarray, joined: np.ndarray, valid: np.ndarray, min_size: int,
                 uniform_spread: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The connected components of the valid faces under the ``joined`` (E', 2) pairs: each
-    valid face's component (V,) in [0, K), their median ``features`` (K, C), and which are
-    uniform (K,) (at least ``min_size`` faces, spread below ``uniform_spread``) and which too
-    wide to be (K,) (at least ``min_size`` faces, spread at or above it)."""
+    valid face's component (V,) in [0, K), their median ``features`` (K, C), which are
+    uniform (K,) (at least ``min_size`` faces, spread below ``uniform_spread``) and which are
+    large enough to be (K,) (at least ``min_size`` faces)."""
     f = len(features)
     graph = sparse.csr_matrix((np.ones(len(joined)), (joined[:, 0], joined[:, 1])), shape=(f, f))
     _, comp = connected_components(graph, directed=False)
@@ -121,7 +124,24 @@ def _components(features: np.ndarray, joined: np.ndarray, valid: np.ndarray, min
     medians = group_quantile(inverse, values, len(ids), 0.5, interpolate=True)
     spreads = group_quantile(inverse, np.abs(values - medians[inverse]), len(ids), 0.5, interpolate=True).max(axis=1)
     large = counts >= min_size
-    return inverse, medians, large & (spreads < uniform_spread), large & (spreads >= uniform_spread)
+    return inverse, medians, large & (spreads < uniform_spread), large
+
+
+def _parted(features: np.ndarray, joined: np.ndarray, valid: np.ndarray, component: np.ndarray, count: int,
+            threshold: float, min_size: int, uniform_spread: float) -> np.ndarray:
+    """(K,) which of ``count`` components (``component`` (V,): each valid face's) fall apart
+    into different albedos under the ``joined`` (E', 2) pairs that remain once the bridges
+    are cut: among its parts of at least ``min_size`` faces, two whose median ``features``
+    (F, C) differ by ``threshold`` or more in some feature (as :func:`segment` parts regions)."""
+    part, medians, _, large = _components(features, joined, valid, min_size, uniform_spread)
+    owner = np.zeros(len(large), dtype=np.int64)
+    owner[part] = component                       # a part lies within one component
+    high = np.full((count, features.shape[1]), -np.inf)
+    low = np.full((count, features.shape[1]), np.inf)
+    np.maximum.at(high, owner[large], medians[large])
+    np.minimum.at(low, owner[large], medians[large])
+    with np.errstate(invalid="ignore"):           # a component without a large part: -inf - inf
+        return np.max(high - low, axis=1) >= threshold
 
 
 def bridge_faces(features: np.ndarray, close: np.ndarray, threshold: float) -> np.ndarray:

@@ -163,10 +163,10 @@ def test_bridges_leave_noisy_uniform_regions_whole():
     assert bridges[band].mean() > 0.5 and not bridges[~near].any()
 
 
-def test_bridges_cut_only_components_too_wide_to_be_uniform():
+def test_a_component_whose_parts_agree_is_not_cut():
     """Noise near the threshold inside one region: every other face has close neighbours 0.14
-    apart (a bridge by :func:`bridge_faces`), but the component's spread (0.035) is uniform, so
-    nothing is cut and the region stays whole."""
+    apart (a bridge by :func:`bridge_faces`), but cut there the region falls into pieces too
+    small to be parts (and of one albedo), so nothing is cut and the region stays whole."""
     levels = np.tile([0.0, 0.07, 0.0, -0.07], 10)
     albedo, edges = _path(levels)
     feat = albedo_features(albedo)
@@ -175,10 +175,10 @@ def test_bridges_cut_only_components_too_wide_to_be_uniform():
     assert np.all(labels == 0)
 
 
-def test_only_the_wide_component_is_cut_among_several_with_invalid_faces():
+def test_only_the_component_of_two_albedos_is_cut_among_several_with_invalid_faces():
     """Two components apart (a gap of 0.5) and an invalid face: the first chains two albedos
-    through a blend and is cut; the second, noisy near the threshold but uniform, keeps its
-    bridges; the invalid face stays outside every region."""
+    through a blend and is cut; the second, noisy near the threshold, keeps its bridges; the
+    invalid face stays outside every region."""
     chained = np.concatenate([np.zeros(20), [-0.11], np.full(20, -0.22)])
     noisy = -0.72 + np.tile([0.0, 0.07, 0.0, -0.07], 5)
     levels = np.concatenate([chained, [5.0], noisy])
@@ -203,3 +203,16 @@ def test_faces_blend_albedos_in_clusters_of_several_or_when_smaller_than_pixels(
     assert not blends(SimpleNamespace(merged_faces=False, all_obs=resolved))
     assert blends(SimpleNamespace(merged_faces=True, all_obs=resolved))
     assert blends(SimpleNamespace(merged_faces=False, all_obs=unresolved))
+
+
+def test_a_small_region_chained_to_a_large_one_is_parted():
+    """30 faces of one albedo, a blend, 10 faces of another 0.22 apart: the chained component's
+    median spread is 0 (uniform, so a spread test alone would keep the two tied), but cut at
+    the blend it leaves two parts of different albedos: two regions."""
+    albedo, edges = _path(np.concatenate([np.zeros(30), [-0.11], np.full(10, -0.22)]))
+    valid = np.ones(41, bool)
+    tied, _ = segment(albedo, edges, valid, 0.12, 0.08, merge="complete")
+    assert np.all(tied[:30] == tied[0]) and np.all(tied[31:] == tied[0]) and tied[0] >= 0
+    labels, _ = segment(albedo, edges, valid, 0.12, 0.08, merge="complete", bridges=True)
+    assert labels[30] == -1 and labels[0] != labels[40] and labels.max() == 1
+    assert np.all(labels[:30] == labels[0]) and np.all(labels[31:] == labels[40])
