@@ -98,8 +98,8 @@ class Prepared:
         """True when a face's colour may blend its neighbours' albedos: the faces are clusters of
         several faces (:meth:`clustered`), or faces smaller than the pixels that see them
         (observed through their pixel centres, :attr:`Observations.unresolved`). A face on a
-        boundary then shows a colour between the two sides' (the segmentation leaves such
-        bridges out: :func:`estimator.solvers.segmentation.segment`)."""
+        boundary then shows a colour between the two sides' (the segmentation cuts a component
+        at such bridges where its parts differ: :func:`estimator.solvers.segmentation.segment`)."""
         return self.merged_faces or self.all_obs.unresolved is not None
 
     @property
