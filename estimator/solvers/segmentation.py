@@ -84,8 +84,8 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     e0, e1 = edges[:, 0], edges[:, 1]
     close = valid[e0] & valid[e1] & (np.max(np.abs(feat[e0] - feat[e1]), axis=1) < threshold)
     inverse, medians, uniform, _ = _components(feat, edges[close], valid, min_size, uniform_spread)
-    if bridges:
-        bridge = bridge_faces(feat, edges[close], threshold)
+    bridge = bridge_faces(feat, edges[close], threshold) if bridges else np.zeros(f, dtype=bool)
+    if bridge.any():   # without a bridge the parts are the components themselves: nothing to cut
         in_parted = np.zeros(f, dtype=bool)
         in_parted[valid] = _parted(feat, edges[close & ~bridge[e0] & ~bridge[e1]], valid, inverse, len(uniform),
                                    threshold, min_size, uniform_spread)[inverse]
