@@ -46,7 +46,7 @@ class CoatConfig(Section):
         light to this degree, and the decision's criterion keeps one of them or neither.
         Measured on the random family's 40 development seeds (1000-1039, full size): 3 lost
         14.0 dB of PSNR summed over the seeds (median 33.8 -> 32.8 dB); on the rough-coated seed
-        1000 the rows of degrees 3 and 4 explain the true reflection (rendered alone) best, 62-78 %
+        1000 the rows of degrees 3 and 4 explain the true reflection (rendered alone) best, 61-78 %
         of its variance, against 46-70 % at 2 and 32-51 % at 6.
     coat_min_share : the coat is removed only when its median share of the colours exceeds this.
     coat_max_negative : the fitted weight is scaled down until subtracting it turns at most
