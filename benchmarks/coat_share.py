@@ -42,7 +42,9 @@ from scoring import score  # noqa: E402
 
 from estimator import InputError, estimate  # noqa: E402
 from estimator.light import coat  # noqa: E402
+from estimator.methods import get_method  # noqa: E402
 from estimator.pipeline.prepared import prepare  # noqa: E402
+from estimator.rays.raycast import RayCaster  # noqa: E402
 from harness.io.atomic import atomic_directory  # noqa: E402
 from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.exr import read_exr, write_exr  # noqa: E402
@@ -94,18 +96,18 @@ def coat_weights(folder: str, coat_folder: str) -> dict:
     (module docstring); {'error': ...} where the estimate fails."""
     ds = read_dataset(folder, load_test=False, load_truth=False)
     name, config = estimator_settings(ds.meta, "retinex-segmented", {"coat_correction": False})
+    caster = RayCaster(ds.data.mesh, config.variant)   # the estimate's buffers and shadow function, reused
     try:
-        light = estimate(ds.data, name, config).light      # the light the correction starts from
+        light = estimate(ds.data, name, config, caster=caster).light   # the light the correction starts from
     except InputError as exc:
         return {"error": str(exc)}
-    obs = prepare(ds.data, config).obs
+    obs = prepare(ds.data, config, caster=caster).obs
     bare = prepare(read_dataset(coat_folder, load_test=False, load_truth=False).data, config).obs
     keys = obs.face * obs.num_views + obs.view
     _, mine, theirs = np.intersect1d(keys, bare.face * bare.num_views + bare.view, return_indices=True)
     normals = ds.data.mesh.face_normals[obs.face]
     rows = coat.coat_rows(normals, obs.view_dir, light, config.coat_order, config.coat_ior)
-    fitted = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, config.robust_loss if config.robust_loss != "auto"
-                           else "cauchy")[0]
+    fitted = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, get_method(name)(config).loss)[0]
     applied = fitted * coat.admissible_scale(obs.rgb, fitted * rows, config.coat_max_negative)[0]
     true = coat.fit_coat(obs.face[mine], bare.rgb[theirs], rows[mine], obs.num_faces, "none")[0]
     return {"fitted": fitted.tolist(), "applied": applied.tolist(), "true": true.tolist(), "rows": int(len(mine))}

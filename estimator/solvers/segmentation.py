@@ -114,8 +114,8 @@ def _components(features: np.ndarray, joined: np.ndarray, valid: np.ndarray, min
                 uniform_spread: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The connected components of the valid faces under the ``joined`` (E', 2) pairs: each
     valid face's component (V,) in [0, K), their median ``features`` (K, C), which are
-    uniform (K,) (at least ``min_size`` faces, spread below ``uniform_spread``) and which are
-    large enough to be (K,) (at least ``min_size`` faces)."""
+    uniform (K,) (at least ``min_size`` faces, spread below ``uniform_spread``) and which have
+    at least ``min_size`` faces (K,), uniform or not."""
     f = len(features)
     graph = sparse.csr_matrix((np.ones(len(joined)), (joined[:, 0], joined[:, 1])), shape=(f, f))
     _, comp = connected_components(graph, directed=False)
