@@ -37,6 +37,14 @@ from ..solvers import robust
 # left would move an albedo by under 0.1 %, far below any accuracy an albedo is judged at
 SHADING_TOLERANCE = 3e-4
 
+# the light's block of the Gauss-Newton matrix (faces x coefficients^2 to form, the fit's whole
+# cost) is kept from the step before while that step changed no usable face's log shading by
+# more than this: the block is a sum over faces of their inverse shadings squared times IRLS
+# weights, so it then moves by a few per cent, and a step with it still solves for the exact
+# gradient (the fit converges to the same light, at nearly the same rate). A fit ends only on a
+# step taken with a fresh block.
+BLOCK_REUSE = 0.02
+
 
 @dataclass
 class EdgeFitConfig(Section):
@@ -246,14 +254,18 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, regions, light, u
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
+    block, change = None, np.inf
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, graph, member, group, alpha)
         weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
         # the log shading's gradient is columns / shade per face; 0 on faces outside the fit
         # (their shading may be 0: a face that sees no sky), which no edge or region row reads
         inverse_shade = np.where(usable, 1.0 / np.where(usable, shade, 1.0), 0.0)
+        fresh = block is None or change > BLOCK_REUSE or change < SHADING_TOLERANCE
+        if fresh:
+            block = _light_block(columns, inverse_shade, graph, member, weights)
         normal, gradient = _normal_equations(columns, inverse_shade, graph, member, group, regions, weights,
-                                             residual)
+                                             residual, block)
         # the ridge on the light relative to its DC: with an ``extra`` shading the scale is
         # free, and a ridge on the coefficients themselves would shrink the whole light until
         # the (faint) extra term is as bright as the direct, bending its shape
@@ -276,7 +288,7 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, regions, light, u
                      float(np.max(np.abs(t * step[k:]), initial=0.0)))
         light, shade, log_shade = trial, trial_shade, trial_log
         alpha = alpha + t * step[k:]
-        if change < SHADING_TOLERANCE:
+        if change < SHADING_TOLERANCE and fresh:
             break
     return light, alpha
 
@@ -288,9 +300,17 @@ def _residuals(ell, log_shade, graph, member, group, alpha) -> np.ndarray:
     return np.concatenate([edge, region])
 
 
-def _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual):
+def _light_block(columns, inverse_shade, graph, member, weights) -> np.ndarray:
+    """(k, k) the light coefficients' block of :func:`_normal_equations`' matrix."""
+    faces, ne = len(inverse_shade), len(graph)
+    on_diagonal = np.bincount(member, weights[ne:], faces) if len(member) else None   # summed per face
+    return columns.T @ (graph.laplacian(weights[:ne], inverse_shade, on_diagonal) @ columns)
+
+
+def _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual, block=None):
     """Gauss-Newton normal equations (J^T W J, J^T W r) of :func:`_residuals` with respect to
-    the light coefficients and the regions' log albedos, without forming J.
+    the light coefficients and the regions' log albedos, without forming J; ``block`` (k, k):
+    the light's block of J^T W J already formed (:func:`_light_block`; None: formed here).
 
     The log shading's gradient per face is g = D c, ``columns`` c (F, k) the diffuse rows of
     the unknowns and D = diag(``inverse_shade``) (F,) (0 outside the fit). An edge's row is
@@ -307,8 +327,7 @@ def _normal_equations(columns, inverse_shade, graph, member, group, regions, wei
     r_edge, r_region = residual[:ne], residual[ne:]
     normal = np.zeros((k + regions, k + regions))
     gradient = np.zeros(k + regions)
-    on_diagonal = np.bincount(member, w_region, faces) if len(member) else None   # summed per face
-    normal[:k, :k] = columns.T @ (graph.laplacian(w_edge, inverse_shade, on_diagonal) @ columns)
+    normal[:k, :k] = _light_block(columns, inverse_shade, graph, member, weights) if block is None else block
     pulled = graph.gather(w_edge * r_edge)
     if len(member):
         pulled = pulled + np.bincount(member, w_region * r_region, faces)

@@ -137,3 +137,26 @@ def test_faces_no_light_reaches_are_left_out():
     with np.errstate(all="raise"):
         fit, _ = log_shading_fit(radiance, c_matrix, edges, usable)
     np.testing.assert_allclose(fit, light / light[0], rtol=1e-4, atol=1e-5)
+
+
+def test_reusing_the_light_block_reaches_the_same_light_with_fewer_blocks(monkeypatch):
+    """The light's block of the Gauss-Newton matrix is kept while steps are small
+    (:data:`edge_fit.BLOCK_REUSE`): the gradient stays exact, so the fit ends at the light of a
+    fit that forms the block at every step, within the stopping tolerance, having formed it
+    fewer times. Noisy radiance, so the optimum is not an exact fit."""
+    from estimator.light import edge_fit
+    c_matrix, edges, labels, albedo, light, radiance = _grid(32, seed=3)
+    radiance = radiance * np.exp(0.05 * np.random.default_rng(1).normal(size=radiance.shape))
+    usable = np.ones(len(radiance), dtype=bool)
+    formed = []
+    block = edge_fit._light_block
+    monkeypatch.setattr(edge_fit, "_light_block", lambda *a: formed.append(1) or block(*a))
+    reused, reused_albedo = log_shading_fit(radiance, c_matrix, edges, usable, labels)
+    n_reused = len(formed)
+    formed.clear()
+    monkeypatch.setattr(edge_fit, "BLOCK_REUSE", 0.0)   # a fresh block at every step
+    fresh, fresh_albedo = log_shading_fit(radiance, c_matrix, edges, usable, labels)
+    assert n_reused < len(formed)
+    shading = np.log(c_matrix @ reused) - np.log(c_matrix @ fresh)
+    assert np.abs(shading).max() < 3 * edge_fit.SHADING_TOLERANCE
+    np.testing.assert_allclose(reused_albedo, fresh_albedo, rtol=3 * edge_fit.SHADING_TOLERANCE)
