@@ -128,13 +128,19 @@ class Camera:
         origins : (H*W, 3) float64
         directions : (H*W, 3) float64, unit length, world space.
         """
+        d = np.ascontiguousarray(self.pixel_directions().T)
+        return np.broadcast_to(self.center, d.shape).copy(), d
+
+    def pixel_directions(self) -> np.ndarray:
+        """(3, H*W) float64 unit world directions through every pixel centre, row-major from
+        the top-left, one row per axis (what a ray query takes, without an (H*W, 3) transpose)."""
         x = (np.arange(self.width) + 0.5 - self.cx) / self.fx
         y = -(np.arange(self.height) + 0.5 - self.cy) / self.fy
         rot = self.c2w[:3, :3]
         # world direction = x * right + y * up - forward, for every (row, col)
-        d = (y[:, None, None] * rot[:, 1] + x[None, :, None] * rot[:, 0] - rot[:, 2]).reshape(-1, 3)
-        d /= np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
-        return np.broadcast_to(self.center, d.shape).copy(), d
+        d = y[None, :, None] * rot[:, 1, None, None] + x[None, None, :] * rot[:, 0, None, None] - rot[:, 2, None, None]
+        d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        return d.reshape(3, -1)
 
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project world points (N, 3) to continuous pixel coordinates.

@@ -38,6 +38,14 @@ def test_pixel_rays_and_projection_are_inverse():
     assert xy[0, 0] > cam.cx and xy[0, 1] < cam.cy
 
 
+def test_pixel_directions_are_the_pixel_rays_per_axis():
+    cam = camera.Camera(camera.look_at([0.5, 1.0, 4.0], [0, 0, 0]), 70.0, 75.0, 30.5, 22.0, 64, 48)
+    d = cam.pixel_directions()
+    assert d.shape == (3, 64 * 48)
+    np.testing.assert_array_equal(d.T, cam.pixel_rays()[1])
+    np.testing.assert_allclose(np.linalg.norm(d, axis=0), 1.0, atol=1e-15)
+
+
 def test_bad_cameras_are_refused():
     with pytest.raises(ValueError, match="4x4"):
         camera.Camera(np.eye(3), 1, 1, 0, 0, 4, 4)

@@ -132,6 +132,17 @@ def test_an_estimate_counts_the_faces_observed_through_pixel_centres():
     assert np.all(est.observed[hit])
 
 
+def test_a_face_id_buffer_is_the_first_hit_of_each_pixel_ray():
+    """The buffers' rays, made per axis for a batch of cameras, are the cameras' own pixel rays."""
+    mesh = sphere(2)
+    cams = [Camera(look_at([0.3, 0.8, 3.5], [0, 0, 0]), 48.0, 52.0, 20.5, 14.0, 40, 30),
+            Camera.from_fov(look_at([3, 1, 2], [0, 0, 0]), 40, 24, 36)]
+    caster = RayCaster(mesh)
+    for cam, buffer in zip(cams, caster.face_id_buffers(cams)):
+        assert buffer.shape == (cam.height, cam.width) and (buffer >= 0).any() and (buffer < 0).any()
+        np.testing.assert_array_equal(buffer.ravel(), caster.first_hit_faces(*cam.pixel_rays()))
+
+
 def test_face_id_buffers_are_traced_once_per_camera(monkeypatch):
     """The pose check, the pose refinement's estimates and the observations trace the same views:
     a later call traces only what is new (the corner rays; a moved camera) and gives what a
@@ -141,8 +152,14 @@ def test_face_id_buffers_are_traced_once_per_camera(monkeypatch):
     fresh_pure = RayCaster(mesh).face_id_buffers(cams, pure=True, max_rays=1500)
     caster = RayCaster(mesh)
     traced = []
-    original = caster.first_hit_faces
-    monkeypatch.setattr(caster, "first_hit_faces", lambda o, d: traced.append(len(o)) or original(o, d))
+    original = caster._first_hits
+
+    def counted(ray):
+        hits = original(ray)
+        traced.append(len(hits))
+        return hits
+
+    monkeypatch.setattr(caster, "_first_hits", counted)
     centres = caster.face_id_buffers(cams, max_rays=1500)
     assert sum(traced) == 2 * 40 * 32 and not centres[0].flags.writeable
     traced.clear()
