@@ -202,20 +202,27 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
     smooth = map_differences(height, width)
     cells = height * width
     ridge = smoothness * (smooth.T @ smooth).toarray() + 1e-9 * np.eye(cells)   # (cells, cells), per unit level
-    light = np.zeros((cells, 3))
+    def solved(values: np.ndarray, weights: np.ndarray):
+        """The map (cells,) or (cells, C) for values (N,) or (N, C) at row weights (N,), the
+        rows' residuals with each face's diffuse refitted under it, and the values with each
+        face's diffuse projected off (the residuals at the map 0)."""
+        system, right, faces_fit = _face_eliminated_system(a, b, values, weights)
+        system += max(np.trace(system) / cells, 1e-300) * ridge
+        # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
+        fitted = linalg.cho_solve(linalg.cho_factor(system, overwrite_a=True, check_finite=False), right,
+                                  check_finite=False)
+        return fitted, faces_fit(fitted), faces_fit(np.zeros_like(fitted))
+
+    # the first round weighs every row alike: one system for the three channels
+    light, residuals, projections = solved(rgb, np.ones(rows))
     diffuse = np.full((n_faces, 3), np.nan)
     explained = np.zeros(3)
     for c in range(3):
-        weights = np.ones(rows)
-        for _ in range(max(rounds, 1)):
-            system, right, faces_fit = _face_eliminated_system(a, b, rgb[:, c], weights)
-            system += max(np.trace(system) / cells, 1e-300) * ridge
-            # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
-            light[:, c] = linalg.cho_solve(linalg.cho_factor(system, overwrite_a=True, check_finite=False),
-                                           right, check_finite=False)
-            residual = faces_fit(light[:, c])
+        residual, projected = residuals[:, c], projections[:, c]
+        weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual), floor=1e-12))
+        for _ in range(max(rounds, 1) - 1):
+            light[:, c], residual, projected = solved(rgb[:, c], weights)
             weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual), floor=1e-12))
-        projected = faces_fit(np.zeros(cells))      # the values with each face's diffuse projected off
         total = np.sum(weights * projected ** 2)
         explained[c] = 1.0 - np.sum(weights * residual ** 2) / total if total > 0 else 0.0
         denominator = np.bincount(face, weights * transmit ** 2, minlength=n_faces)
@@ -281,17 +288,19 @@ def _face_eliminated_system(a, b, y, weights):
 
     Returns the (K, K) dense system, the (K,) right side and a function of the map (K,) that
     gives the (N,) residuals with each face's diffuse refitted under it (at the map 0: the
-    values projected off the faces' columns).
+    values projected off the faces' columns). ``y`` (N, C) gives C right sides (K, C), the
+    maps (K, C) and residuals (N, C) of C channels under the same weights.
     """
     weighted_a = sparse.diags(weights) @ a
     denominator = np.asarray((b.multiply(b).T @ weights)).ravel()                   # (F,) D
     inverse = np.where(denominator > 0, 1.0 / np.maximum(denominator, 1e-300), 0.0)
     p = (b.T @ weighted_a).tocsr()                                                  # (F, K) P
     system = (a.T @ weighted_a).toarray() - (p.T @ sparse.diags(inverse) @ p).toarray()
-    right = a.T @ (weights * y) - p.T @ (inverse * (b.T @ (weights * y)))
+    w, inverse_y = (weights, inverse) if y.ndim == 1 else (weights[:, None], inverse[:, None])
+    right = a.T @ (w * y) - p.T @ (inverse_y * (b.T @ (w * y)))
 
     def faces_fit(light: np.ndarray) -> np.ndarray:
         rest = y - a @ light
-        return rest - b @ (inverse * (b.T @ (weights * rest)))
+        return rest - b @ (inverse_y * (b.T @ (w * rest)))
 
     return system, right, faces_fit
