@@ -187,3 +187,11 @@ def test_face_eliminated_system_is_the_projected_rows_normal_equations():
     light = rng.normal(size=cells)
     np.testing.assert_allclose(faces_fit(light), y_c - a_c @ light, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(faces_fit(np.zeros(cells)), y_c, rtol=1e-10, atol=1e-12)
+    # three channels under the same weights: one system, a right side and residuals per channel
+    ys, lights = np.column_stack([y, rng.normal(size=(rows, 2))]), rng.normal(size=(cells, 3))
+    system3, right3, faces_fit3 = _face_eliminated_system(a, b, ys, weights)
+    np.testing.assert_array_equal(system3, system)
+    for c in range(3):
+        one_system, one_right, one_fit = _face_eliminated_system(a, b, ys[:, c], weights)
+        np.testing.assert_allclose(right3[:, c], one_right, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(faces_fit3(lights)[:, c], one_fit(lights[:, c]), rtol=1e-12, atol=1e-14)
