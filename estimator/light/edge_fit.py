@@ -33,9 +33,13 @@ from ..core.settings import Section
 from ..solvers import robust
 
 # a Gauss-Newton step that changes no usable face's log shading, nor any region's log albedo,
-# by more than this ends the fit: the fit converges linearly, about 0.7 per step, so the steps
-# left would move an albedo by under 0.1 %, far below any accuracy an albedo is judged at
-SHADING_TOLERANCE = 3e-4
+# by more than this ends the fit. The fit converges linearly (about 0.7 per step), and its last
+# per cent is slow: measured on the 14 fits of 121 coefficients of one real-light estimate, the
+# 99th percentile of the faces' log shading lies 1.1 % from a fit run to 1e-5 at 3e-4 and at
+# 1e-3 alike, the median 0.04 % and 0.05 %; on the random family's 40 development seeds 1e-3
+# moved the median PSNR by nothing and their sum by -0.45 dB (within the seeds' spread) in
+# two thirds of the steps of 3e-4
+SHADING_TOLERANCE = 1e-3
 
 # the light's block of the Gauss-Newton matrix (faces x coefficients^2 to form, the fit's whole
 # cost) is kept from the step before while that step changed no usable face's log shading by
