@@ -40,8 +40,8 @@ from ..solvers import robust
 # 0.45 dB higher, with 1.5 times the steps of 1e-3
 SHADING_TOLERANCE = 1e-3
 
-# the light's block of the Gauss-Newton matrix (faces x coefficients^2 to form, the fit's whole
-# cost) is kept from the step before while that step changed no usable face's log shading by
+# the light's block of the Gauss-Newton matrix (faces x coefficients^2 to form, most of the
+# fit's cost) is kept from the step before while that step changed no usable face's log shading by
 # more than this: the block is a sum over faces of their inverse shadings squared times IRLS
 # weights, so it then moves by a few per cent, and a step with it still solves for the exact
 # gradient (the fit converges to the same light, at nearly the same rate). A fit ends only on a
