@@ -33,19 +33,21 @@ from ..core.settings import Section
 from ..solvers import robust
 
 # a Gauss-Newton step that changes no usable face's log shading, nor any region's log albedo,
-# by more than this ends the fit. The fit converges linearly (about 0.7 per step), and slowly
-# in its last per cent, which is not worth the time: measured on the random family's 40
-# development seeds, fits run to 1e-5 with up to 100 steps moved the median PSNR from 33.78 to
-# 33.92 dB and the sum by -0.95 dB, in 36 % more time; 3e-4 gave the same median and a sum
-# 0.45 dB higher, with 1.5 times the steps of 1e-3
+# by more than this ends the fit. Measured on the random family's 40 development seeds (median
+# PSNR; the change of its sum over the seeds against 1e-3; cost):
+#   1e-3: 33.78 dB;
+#   3e-4: 33.78 dB, +0.45 dB, 1.5 times the steps of 1e-3 (on one real-light estimate);
+#   1e-5 with up to 100 steps: 33.92 dB, -0.95 dB, every estimate 36 % slower in sum.
 SHADING_TOLERANCE = 1e-3
 
 # the light's block of the Gauss-Newton matrix (faces x coefficients^2 to form, most of the
-# fit's cost) is kept from the step before while that step changed no usable face's log shading by
-# more than this: the block is a sum over faces of their inverse shadings squared times IRLS
-# weights, so it then moves by a few per cent, and a step with it still solves for the exact
-# gradient (the fit converges to the same light, at nearly the same rate). A fit ends only on a
-# step taken with a fresh block.
+# fit's cost) is kept from the last step that formed it while each step since changed no
+# usable face's log shading, nor any region's log albedo, by more than this: the block is a sum
+# over faces of their inverse shadings squared times IRLS weights, so it has moved by a few per
+# cent, and a step with it still solves for the exact gradient (the fit tends to the same
+# light, in a few more steps). A step under SHADING_TOLERANCE ends the fit only when its block
+# was fresh; the fit also ends when ``iterations`` run out or no step keeps every shading
+# positive, whatever its block.
 BLOCK_REUSE = 0.02
 
 

@@ -42,8 +42,12 @@ def test_pixel_directions_are_the_pixel_rays_per_axis():
     cam = camera.Camera(camera.look_at([0.5, 1.0, 4.0], [0, 0, 0]), 70.0, 75.0, 30.5, 22.0, 64, 48)
     d = cam.pixel_directions()
     assert d.shape == (3, 64 * 48)
+    # the OpenGL camera's ray through pixel centre (col, row), turned to the world by c2w
+    cols, rows = np.meshgrid(np.arange(64) + 0.5, np.arange(48) + 0.5)
+    local = np.stack([(cols - 30.5) / 70.0, -(rows - 22.0) / 75.0, -np.ones_like(cols)]).reshape(3, -1)
+    world = cam.c2w[:3, :3] @ local
+    np.testing.assert_allclose(d, world / np.linalg.norm(world, axis=0), atol=1e-15)
     np.testing.assert_array_equal(d.T, cam.pixel_rays()[1])
-    np.testing.assert_allclose(np.linalg.norm(d, axis=0), 1.0, atol=1e-15)
 
 
 def test_bad_cameras_are_refused():
