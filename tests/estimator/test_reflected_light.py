@@ -107,6 +107,24 @@ def test_glints_are_downweighted():
     np.testing.assert_allclose(fit.sh(2), low_true, atol=0.03 * np.abs(low_true[0]).max())
 
 
+@pytest.mark.parametrize("rounds", [0, 1, 2, 4])
+def test_each_channel_is_fitted_as_if_alone(rounds):
+    """The channels share their first (unweighted) round's system, then each is reweighted on
+    its own residuals: a channel's map, diffuse and explained share are those of a fit whose
+    three channels are all that channel. Glints in one channel only, so the channels' weights
+    differ from the second round on."""
+    face, rgb, view_dir, normals, sampling, vis, _ = _rows(_smooth_map(), faces=600, seed=2)
+    rgb = rgb.copy()
+    rgb[::50, 1] += 40.0
+    fit = fit_reflected_light(face, rgb, view_dir, normals, sampling, vis, height=8, width=16, rounds=rounds)
+    for c in range(3):
+        alone = fit_reflected_light(face, np.repeat(rgb[:, c:c + 1], 3, axis=1), view_dir, normals, sampling, vis,
+                                    height=8, width=16, rounds=rounds)
+        np.testing.assert_allclose(fit.radiance[..., c], alone.radiance[..., 0], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(fit.diffuse[:, c], alone.diffuse[:, 0], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(fit.explained[c], alone.explained[0], rtol=1e-9)
+
+
 def test_view_independent_colours_are_not_explained_by_a_reflection():
     """A bare diffuse texture with 1 % noise: nothing changes with the view but the noise.
     A uniform reflected light L = D would explain a uniform diffuse exactly (D = D (1 - F) +
