@@ -306,24 +306,25 @@ def _residuals(ell, log_shade, graph, member, group, alpha) -> np.ndarray:
 
 
 def _light_block(columns, inverse_shade, graph, member, weights) -> np.ndarray:
-    """(k, k) the light coefficients' block of :func:`_normal_equations`' matrix."""
+    """(k, k) the light coefficients' block of :func:`_normal_equations`' matrix: one sparse
+    product and one (k, F) x (F, k) product, the scaling D applied to the sparse matrix's
+    entries. Memory and time grow with faces x k^2, not edges x k^2."""
     faces, ne = len(inverse_shade), len(graph)
     on_diagonal = np.bincount(member, weights[ne:], faces) if len(member) else None   # summed per face
     return columns.T @ (graph.laplacian(weights[:ne], inverse_shade, on_diagonal) @ columns)
 
 
-def _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual, block=None):
+def _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual, block):
     """Gauss-Newton normal equations (J^T W J, J^T W r) of :func:`_residuals` with respect to
     the light coefficients and the regions' log albedos, without forming J; ``block`` (k, k):
-    the light's block of J^T W J already formed (:func:`_light_block`; None: formed here).
+    the light's block of J^T W J (:func:`_light_block`, formed by the caller, which keeps it
+    while steps are small).
 
     The log shading's gradient per face is g = D c, ``columns`` c (F, k) the diffuse rows of
     the unknowns and D = diag(``inverse_shade``) (F,) (0 outside the fit). An edge's row is
     -(g_i - g_j) = -(B g)_e with B the (E', F) signed incidence of ``graph``
     (:class:`EdgeGraph`); a region row of face f in group r is [-g_f, -e_r]. The light's block
-    is therefore c^T D (B^T W_e B + W_r) D c, W_r the region rows' weights on the diagonal: one
-    sparse product and one (k, F) x (F, k) product per step, the scaling applied to the sparse
-    matrix's entries. Memory and time grow with faces x k^2, not edges x k^2.
+    is therefore c^T D (B^T W_e B + W_r) D c, W_r the region rows' weights on the diagonal.
     """
     k = columns.shape[1]
     faces = len(inverse_shade)
@@ -332,7 +333,7 @@ def _normal_equations(columns, inverse_shade, graph, member, group, regions, wei
     r_edge, r_region = residual[:ne], residual[ne:]
     normal = np.zeros((k + regions, k + regions))
     gradient = np.zeros(k + regions)
-    normal[:k, :k] = _light_block(columns, inverse_shade, graph, member, weights) if block is None else block
+    normal[:k, :k] = block
     pulled = graph.gather(w_edge * r_edge)
     if len(member):
         pulled = pulled + np.bincount(member, w_region * r_region, faces)

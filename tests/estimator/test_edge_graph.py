@@ -2,7 +2,7 @@
 import numpy as np
 from scipy import sparse
 
-from estimator.light.edge_fit import EdgeGraph, _normal_equations
+from estimator.light.edge_fit import EdgeGraph, _light_block, _normal_equations
 
 
 def _incidence(i, j, faces):
@@ -66,7 +66,9 @@ def test_normal_equations_are_j_transpose_w_j_of_the_explicit_jacobian():
     member = np.sort(rng.choice(faces, 18, replace=False))
     group = rng.integers(0, regions, len(member))
     weights, residual = rng.random(len(i) + len(member)), rng.normal(size=len(i) + len(member))
-    normal, gradient = _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual)
+    block = _light_block(columns, inverse_shade, graph, member, weights)
+    normal, gradient = _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual,
+                                         block)
     g = columns * inverse_shade[:, None]
     jacobian = np.zeros((len(i) + len(member), k + regions))
     jacobian[:len(i), :k] = -(g[i] - g[j])
@@ -76,8 +78,10 @@ def test_normal_equations_are_j_transpose_w_j_of_the_explicit_jacobian():
     np.testing.assert_allclose(gradient, jacobian.T @ (weights * residual), atol=1e-10)
     # edges alone (no region row): the light's block and gradient only
     edges_only = np.arange(len(i))
-    normal, gradient = _normal_equations(columns, inverse_shade, graph, np.zeros(0, int), np.zeros(0, int), 0,
-                                         weights[edges_only], residual[edges_only])
+    none = np.zeros(0, int)
+    block = _light_block(columns, inverse_shade, graph, none, weights[edges_only])
+    normal, gradient = _normal_equations(columns, inverse_shade, graph, none, none, 0, weights[edges_only],
+                                         residual[edges_only], block)
     jacobian = jacobian[:len(i), :k]
     np.testing.assert_allclose(normal, jacobian.T @ (weights[edges_only, None] * jacobian), atol=1e-10)
     np.testing.assert_allclose(gradient, jacobian.T @ (weights[edges_only] * residual[edges_only]), atol=1e-10)
