@@ -142,6 +142,20 @@ class Camera:
         d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         return d.reshape(3, -1)
 
+    def subpixel_directions(self, pixels: np.ndarray, samples: int) -> np.ndarray:
+        """(3, P*samples^2) float64 unit world directions through the centres of a ``samples`` x
+        ``samples`` grid over each of ``pixels`` (P,) (row-major indices), pixel by pixel, the
+        grid row-major within each."""
+        s = int(samples)
+        offset = (np.arange(s) + 0.5) / s
+        col, row = np.divmod(np.asarray(pixels, dtype=np.int64), self.width)[::-1]
+        x = ((col[:, None, None] + offset[None, None, :]) - self.cx) / self.fx      # (P, 1, s)
+        y = -((row[:, None, None] + offset[None, :, None]) - self.cy) / self.fy     # (P, s, 1)
+        x, y = np.broadcast_arrays(x, y)
+        rot = self.c2w[:3, :3]
+        d = x.ravel()[None] * rot[:, 0, None] + y.ravel()[None] * rot[:, 1, None] - rot[:, 2, None]
+        return d / np.sqrt(np.sum(d * d, axis=0))
+
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project world points (N, 3) to continuous pixel coordinates.
 

@@ -4,12 +4,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..core.data import TriangleMesh, View
 from ..core.errors import InputError
 from ..core.reductions import group_quantile
 from ..core.settings import Section
 from ..rays.raycast import RayCaster
+from .footprints import Footprints, footprint_radiance, pixel_shares, unmixed_rows
 
 
 @dataclass
@@ -25,8 +27,14 @@ class ObservationConfig(Section):
     pure_pixels : observe a face through the pixels it alone covers (the corner rays agree).
         Where such pixels resolve under half of the faces that pixel centres hit (faces
         smaller than a pixel, as on a dense scan), the faces they miss are observed through
-        the pixels whose centre ray hits them, each such pixel's colour the footprint's mean
-        over that face and its neighbours. Off: every face through its pixel centres.
+        the pixels they cover, unmixed from their neighbours (``subpixel_samples``). Off:
+        every face through its pixel centres.
+    subpixel_samples : on a mesh denser than its photos, each usable pixel is an equation in
+        the faces that this many x this many sub-pixel rays hit, weighted by the share of
+        rays each takes (the box filter of a render or a sensor), and a face's row in a view
+        is its radiance solved from every view plus the view-dependent residual of its
+        pixels (:mod:`estimator.pipeline.footprints`). 1: a face's row is the mean colour
+        of the pixels whose centre ray hits it, which mixes its neighbours' colours.
     min_coverage : a pixel is used only when the object covers at least this share of it
         (alpha); 0.999 keeps whole pixels and drops silhouette edges, whose colour mixes
         object and background.
@@ -40,6 +48,7 @@ class ObservationConfig(Section):
     pure_pixels: bool = True
     min_coverage: float = 0.999
     negative_tolerance: float = 0.01
+    subpixel_samples: int = 4
 
     def check(self):
         return [
@@ -47,6 +56,7 @@ class ObservationConfig(Section):
             (self.min_pixels >= 1, "min_pixels must be >= 1"),
             (0 < self.min_coverage <= 1, "min_coverage must lie in (0, 1]"),
             (self.negative_tolerance >= 0, "negative_tolerance must be >= 0"),
+            (self.subpixel_samples >= 1, "subpixel_samples must be >= 1"),
         ]
 
 
@@ -65,8 +75,9 @@ class Observations:
     unresolved : (num_faces,) bool, faces observed through their pixel centres (a footprint's
         mean over them and their neighbours) because pure pixels resolve too few faces
         (:func:`gather_observations`); None when no face is, or without ``pure_pixels``.
-    footprint_pixels : the mean number of pixels a row of an unresolved face averages (its
-        pixel centres in that view); None when no face is unresolved.
+    footprint_pixels : the mean pixel area a row of an unresolved face covers in its view
+        (the share of sub-pixel rays it takes, summed over its pixels; with one sub-pixel
+        sample, its pixel centres); None when no face is unresolved.
     """
 
     face: np.ndarray
@@ -154,10 +165,40 @@ def _face_means(ids: np.ndarray, valid: np.ndarray, rgb: np.ndarray, num_faces: 
     return faces, sums[faces] / counts[faces, None], counts[faces]
 
 
+def _unmixed_rows(caster: RayCaster, views: list[View], usable: list[np.ndarray], centre_ids: list[np.ndarray],
+                  footprint: np.ndarray, samples: int,
+                  min_pixels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of the ``footprint`` faces (F,) bool, unmixed from every usable pixel
+    (``usable``: (H*W,) bool per view) as equations in the faces its ``samples`` x ``samples``
+    sub-pixel rays hit (:mod:`.footprints`): (K,) faces, views, (K, 3) colours and (K,) the
+    pixel area each row's face covers in its view. A (face, view) pair gives a row where the
+    centre rays of ``min_pixels`` usable pixels hit the face (as without sub-pixel rays) or
+    where the face covers at least half of ``min_pixels`` pixels' area. A pixel whose sub-pixel
+    rays miss the mesh (a silhouette) is left out."""
+    f = caster.mesh.num_faces
+    shares, colours, owner, centres = [], [], [], []
+    for index, (view, valid, ids) in enumerate(zip(views, usable, centre_ids)):
+        pixels = np.nonzero(valid)[0]
+        sub = caster.subpixel_faces(view.camera, samples, pixels)
+        whole = np.all(sub >= 0, axis=1)
+        shares.append(pixel_shares(sub[whole], f))
+        colours.append(view.rgb.reshape(-1, 3)[pixels[whole]].astype(np.float64))
+        owner.append(np.full(int(whole.sum()), index, dtype=np.int64))
+        hits, counts = np.unique(ids.ravel()[pixels[whole]], return_counts=True)
+        centres.append(index * f + hits[counts >= min_pixels])
+    fp = Footprints(sp.vstack(shares).tocsr(), np.concatenate(colours), np.concatenate(owner))
+    radiance, _ = footprint_radiance(fp, caster.mesh.face_adjacency)
+    face, view, rgb, share = unmixed_rows(fp, radiance)
+    keep = footprint[face] & ((share >= 0.5 * min_pixels) | np.isin(view * f + face, np.concatenate(centres)))
+    return face[keep], view[keep], rgb[keep], share[keep]
+
+
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = ObservationConfig.min_pixels,
                         min_alpha: float = ObservationConfig.min_coverage,
                         pure_pixels: bool = ObservationConfig.pure_pixels,
-                        negative_tolerance: float = ObservationConfig.negative_tolerance) -> Observations:
+                        negative_tolerance: float = ObservationConfig.negative_tolerance,
+                        subpixel_samples: int = ObservationConfig.subpixel_samples,
+                        max_pixels: int | None = None) -> Observations:
     """Face-ID buffers by primary rays through pixel centres, then per-face mean colours.
 
     Occlusion is exact: a pixel belongs to the first face its centre ray hits.
@@ -165,9 +206,12 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     hit it alone, so antialiased pixels that mix two faces' albedos do not bias small or
     thin regions. When such pixels cover under half of the faces that pixel centres hit,
     the images resolve no face (a mesh denser than its photos): the faces without a pure
-    pixel are then observed through the pixels whose centre ray hits them, a footprint's
-    mean over the face and its neighbours, which is all the images resolve there (a few
-    thin faces of a coarser mesh stay unobserved rather than take a neighbour's colour).
+    pixel are then observed through the pixels they cover, each pixel an equation in the
+    faces its ``subpixel_samples`` x ``subpixel_samples`` rays hit (:func:`_unmixed_rows`;
+    with one sample, the mean of the pixels whose centre ray hits the face). A few thin
+    faces of a coarser mesh stay unobserved rather than take a neighbour's colour. The
+    pixels' equations are held in memory: beyond ``max_pixels`` usable pixels (None: no
+    bound) the faces are observed through their pixel centres instead.
     Pixels with coverage ``alpha < min_alpha``
     (silhouette edges) are skipped, and faces covered by fewer than
     ``min_pixels`` usable pixels in a view give no row. Pixels with a channel below
@@ -202,11 +246,18 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
             covered[row[0]] = True
     footprint = ~covered if not pure_pixels or 2 * covered.sum() < hit.sum() else np.zeros(f, dtype=bool)
     parts, footprint_pixels = [], 0
+    unmixed = _unmixed_rows(caster, views, usable, centre_ids, footprint, subpixel_samples, min_pixels) \
+        if pure_pixels and footprint.any() and subpixel_samples > 1 \
+        and (max_pixels is None or sum(int(u.sum()) for u in usable) <= max_pixels) else None
     for index, (view, ids, valid, row) in enumerate(zip(views, centre_ids, usable, pure_rows)):
         if footprint.any():   # the footprint rows, and the pure rows (none without pure_pixels)
-            faces, means, pixels = _face_means(ids.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels,
-                                               skip=~footprint)
-            footprint_pixels += int(pixels.sum())
+            if unmixed is None:
+                faces, means, pixels = _face_means(ids.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels,
+                                                   skip=~footprint)
+            else:
+                mine = unmixed[1] == index
+                faces, means, pixels = unmixed[0][mine], unmixed[2][mine], unmixed[3][mine]
+            footprint_pixels += float(pixels.sum())
             if row is not None:
                 order = np.argsort(np.concatenate([row[0], faces]), kind="stable")
                 faces, means = np.concatenate([row[0], faces])[order], np.concatenate([row[1], means])[order]

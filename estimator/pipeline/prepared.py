@@ -30,6 +30,9 @@ class StreamingConfig(Section):
     dense_rows : faces plus kept observations above which the reflection rows (float64, M
         wide) are not held in memory but computed in chunks when needed (:class:`Prepared`);
         1.5 M rows hold at most 1.4 GiB. Only methods with ``streams`` accept such a problem.
+        On a mesh denser than its photos it also bounds the usable pixels whose equations in
+        the faces they cover are held (:mod:`.footprints`); beyond it, faces are observed
+        through their pixel centres.
     light_faces : a streamed solve finds the light from the observations of this many
         observed faces, then every face's albedos with the light fixed: 121 light
         coefficients are determined many times over by 20,000 faces. The per-face methods
@@ -241,7 +244,7 @@ def with_config(prep: Prepared, config: PrepareConfig) -> Prepared:
     """The same observations and shadow function under another model configuration
     (e.g. another Phong exponent): only the reflection matrices are recomputed."""
     for key in ("directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "negative_tolerance",
-                "variant"):
+                "subpixel_samples", "variant"):
         if getattr(config, key) != getattr(prep.config, key):
             raise InputError(f"with_config cannot change {key}; run prepare() again")
     t = time.perf_counter()
@@ -266,7 +269,7 @@ def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | 
     t = time.perf_counter()
     caster = caster or RayCaster(data.mesh, config.variant)
     all_obs = gather_observations(caster, data.views, config.min_pixels, config.min_coverage, config.pure_pixels,
-                                  config.negative_tolerance)
+                                  config.negative_tolerance, config.subpixel_samples, config.dense_rows)
     normals = data.mesh.face_normals
     cos_view = np.sum(normals[all_obs.face] * all_obs.view_dir, axis=1)
     # the first surface a camera ray hits faces the camera, so on a mesh wound outwards the

@@ -179,6 +179,17 @@ class RayCaster:
             self._keep(k, buffer)
         return [held[(kind, key)] for key in keys]
 
+    def subpixel_faces(self, camera: Camera, samples: int, pixels: np.ndarray) -> np.ndarray:
+        """(P, samples^2) int64 the face each of ``samples`` x ``samples`` sub-pixel rays through
+        each of ``pixels`` (P,) (row-major indices) hits, -1 on a miss
+        (:meth:`Camera.subpixel_directions`; not kept)."""
+        s = int(samples)
+        directions = camera.subpixel_directions(pixels, s).astype(np.float32)
+        centre = camera.center.astype(np.float32)
+        ray = self.mi.Ray3f(self.mi.Point3f(*(np.full(directions.shape[1], c) for c in centre)),
+                            self.mi.Vector3f(*directions))
+        return self._first_hits(ray).reshape(-1, s * s)
+
     def _keep(self, key: tuple, buffer: np.ndarray) -> None:
         """Hold ``buffer`` under ``key`` as the most recently used, dropping the least recently
         used beyond :data:`BUFFER_CACHE_BYTES`."""

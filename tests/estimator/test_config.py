@@ -14,7 +14,8 @@ from estimator.config import SECTIONS
 WIRE_NAMES = (
     "sh_order", "diffuse_light", "defilter_order", "phong_exponent", "specular_model", "variant",
     "directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "negative_tolerance",
-    "dense_rows", "light_faces", "iterations", "tol", "components", "lm_damping_start", "lm_damping_raise",
+    "subpixel_samples", "dense_rows", "light_faces", "iterations", "tol", "components", "lm_damping_start",
+    "lm_damping_raise",
     "lm_damping_lower", "lm_damping_max", "robust_loss", "robust_rounds", "glint_ratio", "segment_threshold",
     "uniform_spread", "albedo_prior", "retinex_quantile", "retinex_ridge", "retinex_iterations", "retinex_max_edges",
     "sun_min_gain", "max_suns", "coat_correction", "coat_per_region", "coat_ior", "coat_order", "coat_min_share",
@@ -56,6 +57,7 @@ def test_every_setting_has_one_section_and_one_default():
     ({"tol": float("nan")}, "tol"),
     ({"variant": 3}, "variant"),
     ({"pure_pixels": 1}, "pure_pixels"),
+    ({"subpixel_samples": 0}, "subpixel_samples"),
     ({"robust_loss": "l1"}, "robust_loss"),
     ({"coat_ior": 1.0}, "coat_ior"),
     ({"pose_folds": 1}, "pose_folds"),
