@@ -12,9 +12,10 @@ Each seed's light, material, albedo and camera layout are kept
 subdivisions (the same surface, 5,120 x 4^s faces). It is seen from ``--views`` cameras
 (``--resolution``: their width and height instead of the draw's, e.g. 1024 to score the same
 scene at 4x the resolution). Prints per seed: faces, the faces no pure pixel resolves, observed
-through the pixels they cover (``info["unresolved_faces"]``), the estimated share, of all faces and of the faces some pixel
-centre hits, diffuse PSNR after a per-channel least-squares scale, the share within ±10 %,
-ARI on uniform regions, time per stage and peak RSS. Rows go to DIR/dense_scan.json.
+through the pixels they cover (``info["unresolved_faces"]``), the estimated share, of all faces
+and of the faces some pixel centre hits, diffuse PSNR after a per-channel least-squares scale,
+the share within ±10 %, ARI on uniform regions, time per stage and peak RSS. Rows go to
+DIR/dense_scan.json.
 """
 from __future__ import annotations
 
