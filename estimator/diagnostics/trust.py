@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 
 from ..model.estimate import Estimate
 from ..pipeline.exposure import view_gains
-from ..pipeline.prepared import Prepared
+from ..pipeline.prepared import ROW_CHUNK, Prepared
 from ..solvers.robust import exposure_level, relative_residuals, robust_scale
 
 OUTLIER_SIGMAS = 3.0        # a row is an outlier beyond this many robust scales
@@ -28,7 +28,10 @@ MAX_UNKEPT = 0.2            # share of faces without a kept observation
 PLANE_MARGIN = 1e-3         # cosine above a face's plane beyond float32 rounding of the visibility's own test
 
 
-CONDITION_ROWS = 200_000    # a streamed problem's light condition and mirror neighbours use this many rows
+# the light's condition number and a streamed problem's mirror neighbours use at most this many
+# rows, drawn at random: on two dense scans (283k and 294k rows) the condition number from 200k
+# rows is within 0.3 % of all rows'
+CONDITION_ROWS = 200_000
 
 
 def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -44,17 +47,21 @@ def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np
 def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
     """Largest condition number over channels of the light's least-squares system with the
     albedos fixed (rows: (N,) bool, the observations used), sqrt of the normal matrix's
-    eigenvalue ratio. A streamed problem uses at most :data:`CONDITION_ROWS` of them, drawn
-    at random (seed 0)."""
+    eigenvalue ratio, from at most :data:`CONDITION_ROWS` of them, drawn at random (seed 0)."""
     index = np.nonzero(rows)[0]
-    if prep.streamed and len(index) > CONDITION_ROWS:
+    if len(index) > CONDITION_ROWS:
         index = np.sort(np.random.default_rng(0).choice(index, CONDITION_ROWS, replace=False))
-    face = prep.obs.face[index]
-    c_rows, d_rows = prep.diffuse_rows(face), prep.specular_rows(index)
+    gram = [0.0] * 3
+    for start in range(0, len(index), ROW_CHUNK):   # in chunks: no (N, M) temporaries
+        part = index[start:start + ROW_CHUNK]
+        face = prep.obs.face[part]
+        c_rows, d_rows = prep.diffuse_rows(face), prep.specular_rows(part)
+        for k in range(3):
+            jac = est.diffuse[face, k, None] * c_rows + est.specular[face, k, None] * d_rows
+            gram[k] = gram[k] + jac.T @ jac
     worst = 1.0
     for k in range(3):
-        jac = est.diffuse[face, k, None] * c_rows + est.specular[face, k, None] * d_rows
-        eig = np.linalg.eigvalsh(jac.T @ jac)
+        eig = np.linalg.eigvalsh(gram[k])
         if eig[-1] <= 0:
             return float("inf")
         worst = max(worst, float(np.sqrt(eig[-1] / max(eig[0], eig[-1] * 1e-300))))
