@@ -72,9 +72,10 @@ class Observations:
     num_faces, num_views : int
     rejected : (num_views,) int64 object pixels dropped per view as negative beyond noise.
     view : (N,) int64 view of each row (None when unknown).
-    unresolved : (num_faces,) bool, faces observed through their pixel centres (a footprint's
-        mean over them and their neighbours) because pure pixels resolve too few faces
-        (:func:`gather_observations`); None when no face is, or without ``pure_pixels``.
+    unresolved : (num_faces,) bool, faces observed through the pixels they cover, unmixed
+        from their neighbours (or through their pixel centres), because pure pixels resolve
+        too few faces (:func:`gather_observations`); None when no face is, or without
+        ``pure_pixels``.
     footprint_pixels : the mean pixel area a row of an unresolved face covers in its view
         (the share of sub-pixel rays it takes, summed over its pixels; with one sub-pixel
         sample, its pixel centres); None when no face is unresolved.

@@ -20,8 +20,8 @@ def test_pixel_shares_count_the_sub_pixel_rays_per_face():
 
 
 def _mixed_pixels(faces: int, views: int, rng) -> tuple[sp.csr_matrix, np.ndarray]:
-    """(P, F) shares of pixels that each mix two or three random faces, ``views`` grids of
-    about two pixels per face, and (P,) each pixel's view."""
+    """(P, F) shares of pixels, each half one random face and the rest up to seven others
+    (sixteen sub-pixel rays), ``views`` grids of two pixels per face, and (P,) each pixel's view."""
     rows, owner = [], []
     for v in range(views):
         ids = rng.integers(0, faces, size=(2 * faces, 16))
@@ -32,7 +32,7 @@ def _mixed_pixels(faces: int, views: int, rng) -> tuple[sp.csr_matrix, np.ndarra
 
 
 def test_the_faces_radiance_is_recovered_from_pixels_that_mix_them_despite_highlights():
-    """Pixels mixing two or three faces, with a highlight (5x the level) on 5 % of them: the
+    """Pixels that mix several faces, with a highlight (5x the level) on 5 % of them: the
     absolute-deviation solve returns every face's radiance within 2 % (the median face within
     0.2 %); their footprint mean
     (what a pixel centre gives) and least squares are far off."""
