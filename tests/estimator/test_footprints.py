@@ -1,6 +1,7 @@
 """Pixels as equations in the faces they cover (estimator.pipeline.footprints)."""
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import lsqr
 
 from estimator.core.camera import Camera, look_at
 from estimator.core.data import View
@@ -34,8 +35,7 @@ def _mixed_pixels(faces: int, views: int, rng) -> tuple[sp.csr_matrix, np.ndarra
 def test_the_faces_radiance_is_recovered_from_pixels_that_mix_them_despite_highlights():
     """Pixels that mix several faces, with a highlight (5x the level) on 5 % of them: the
     absolute-deviation solve returns every face's radiance within 2 % (the median face within
-    0.2 %); their footprint mean
-    (what a pixel centre gives) and least squares are far off."""
+    0.2 %); their footprint mean (what a pixel centre gives) and least squares are far off."""
     rng = np.random.default_rng(0)
     shares, view = _mixed_pixels(200, 12, rng)
     truth = rng.uniform(0.05, 1.0, size=(200, 3))
@@ -46,7 +46,7 @@ def test_the_faces_radiance_is_recovered_from_pixels_that_mix_them_despite_highl
     np.testing.assert_allclose(area, np.asarray(shares.sum(axis=0)).ravel())
     np.testing.assert_allclose(radiance, truth, rtol=0.02)
     assert np.median(np.abs(radiance / truth - 1)) < 0.002
-    least_squares = sp.linalg.lsqr(shares, rgb[:, 0])[0]
+    least_squares = lsqr(shares, rgb[:, 0])[0]
     assert np.max(np.abs(least_squares / truth[:, 0] - 1)) > 0.2
     blurred = (shares.T @ rgb) / area[:, None]
     assert np.max(np.abs(blurred / truth - 1)) > 0.5
