@@ -136,11 +136,7 @@ class Camera:
         the top-left, one row per axis (what a ray query takes, without an (H*W, 3) transpose)."""
         x = (np.arange(self.width) + 0.5 - self.cx) / self.fx
         y = -(np.arange(self.height) + 0.5 - self.cy) / self.fy
-        rot = self.c2w[:3, :3]
-        # world direction = x * right + y * up - forward, for every (row, col)
-        d = y[None, :, None] * rot[:, 1, None, None] + x[None, None, :] * rot[:, 0, None, None] - rot[:, 2, None, None]
-        d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        return d.reshape(3, -1)
+        return self._unit_directions(x[None, :], y[:, None]).reshape(3, -1)
 
     def subpixel_directions(self, pixels: np.ndarray, samples: int) -> np.ndarray:
         """(3, P*samples^2) float64 unit world directions through the centres of a ``samples`` x
@@ -151,10 +147,17 @@ class Camera:
         col, row = np.divmod(np.asarray(pixels, dtype=np.int64), self.width)[::-1]
         x = ((col[:, None, None] + offset[None, None, :]) - self.cx) / self.fx      # (P, 1, s)
         y = -((row[:, None, None] + offset[None, :, None]) - self.cy) / self.fy     # (P, s, 1)
+        return self._unit_directions(x, y).reshape(3, -1)
+
+    def _unit_directions(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """(3, *shape) unit world directions x * right + y * up - forward (OpenGL camera) of
+        image-plane coordinates x, y at unit depth, broadcast to one shape."""
         x, y = np.broadcast_arrays(x, y)
+        axes = (slice(None),) + (None,) * x.ndim
         rot = self.c2w[:3, :3]
-        d = x.ravel()[None] * rot[:, 0, None] + y.ravel()[None] * rot[:, 1, None] - rot[:, 2, None]
-        return d / np.sqrt(np.sum(d * d, axis=0))
+        d = y[None] * rot[:, 1][axes] + x[None] * rot[:, 0][axes] - rot[:, 2][axes]
+        d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        return d
 
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project world points (N, 3) to continuous pixel coordinates.

@@ -31,6 +31,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import cg
 
+from ..core.edge_graph import EdgeGraph
+
 # a ridge towards the footprint mean (the pixel centres' colour), relative to the median face's
 # information (its diagonal of the normal equations): it only keeps the equations definite
 # for a face that no pixel and no edge reaches
@@ -90,26 +92,22 @@ def footprint_radiance(fp: Footprints, edges: np.ndarray | None = None,
     seen = area > 0
     prior[seen] = (w.T @ fp.rgb)[seen] / area[seen, None]
     floor = NOISE_SHARE * max(float(np.median(np.linalg.norm(fp.rgb, axis=1))), 1e-30)
-    difference = None
-    if edges is not None and len(edges):
-        e = len(edges)
-        difference = sp.csr_matrix((np.tile([1.0, -1.0], e), (np.repeat(np.arange(e), 2), edges.ravel())),
-                                   shape=(e, f))
+    graph = EdgeGraph(edges[:, 0], edges[:, 1], f) if edges is not None and len(edges) else None
     radiance = prior.copy()
     weight = np.full(w.shape[0], 1.0 / floor)          # the first round: every residual and difference at the floor
-    edge_weight = None if difference is None else np.full(difference.shape[0], SMOOTHNESS / floor)
+    edge_weight = None if graph is None else np.full(len(graph), SMOOTHNESS / floor)
     for round_ in range(rounds + 1):
         if round_:
             residual = np.linalg.norm(fp.rgb - w @ radiance, axis=1)
             weight = 1.0 / np.maximum(residual, floor)
-            if difference is not None:
-                edge_weight = SMOOTHNESS / np.maximum(np.linalg.norm(difference @ radiance, axis=1), floor)
+            if graph is not None:
+                edge_weight = SMOOTHNESS / np.maximum(np.linalg.norm(graph.difference(radiance), axis=1), floor)
         normal = (w.T @ sp.diags(weight) @ w).tocsr()
         diagonal = normal.diagonal()
         ridge = RIDGE * float(np.median(diagonal[seen])) if seen.any() else 1.0
         normal = normal + sp.diags(np.full(f, ridge))
-        if difference is not None:
-            smooth = (difference.T @ sp.diags(edge_weight) @ difference).tocsr()
+        if graph is not None:
+            smooth = graph.laplacian(edge_weight)
             normal = normal + smooth
             diagonal = diagonal + smooth.diagonal()
         rhs = w.T @ (weight[:, None] * fp.rgb) + ridge * prior

@@ -2,7 +2,8 @@
 import numpy as np
 from scipy import sparse
 
-from estimator.light.edge_fit import EdgeGraph, _light_block, _normal_equations
+from estimator.core.edge_graph import EdgeGraph
+from estimator.light.edge_fit import _light_block, _normal_equations
 
 
 def _incidence(i, j, faces):
