@@ -85,13 +85,6 @@ def coat_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, orde
     return factor[:, None] * low
 
 
-def transmission(normals: np.ndarray, view_dir: np.ndarray, ior: float) -> np.ndarray:
-    """(N,) 1 - F(n . v): the share of the diffuse radiance under a dielectric coat of index
-    ``ior`` that leaves through it towards the camera, for face normals and unit directions to
-    the camera (N, 3) (Mitsuba's ``plastic``; its ``roughplastic`` nearly so)."""
-    return 1.0 - fresnel_dielectric(np.sum(normals * view_dir, axis=1), ior)
-
-
 def mirror_escapes(face: np.ndarray, normals: np.ndarray, view_dir: np.ndarray, sampling: SphereSampling,
                    visibility: Visibility) -> np.ndarray:
     """(N,) 1.0 where the mirror direction of observation k (face ``face`` (N,), its normal
@@ -101,66 +94,32 @@ def mirror_escapes(face: np.ndarray, normals: np.ndarray, view_dir: np.ndarray, 
 
 
 def fit_coat(face: np.ndarray, rgb: np.ndarray, rows: np.ndarray, num_faces: int, loss: str = "cauchy",
-             rounds: int = 5, group: np.ndarray | None = None, num_groups: int = 1,
-             transmission: np.ndarray | None = None) -> np.ndarray:
+             rounds: int = 5, group: np.ndarray | None = None, num_groups: int = 1) -> np.ndarray:
     """(G, 3) weights k_gc >= 0 of ``rows`` (N, 3) in the colours ``rgb`` (N, 3) of faces
     ``face`` (N,), one strength per group of rows ``group`` (N,) in [0, G) (None: one group,
-    G = 1) times a grey coat's per-channel factor (:func:`grey_weights`): least squares on what
-    each face's colours do across views beyond its diffuse radiance, reweighted by ``loss``
-    (glints and shadows the coat term does not explain). Groups let each part of an object that
-    mixes materials (matte, coated, glossy) take its own coat.
-
-    ``transmission`` (N,): the share of each face's diffuse radiance that reaches the camera,
-    1 - F(n . v) through a dielectric coat (Mitsuba's ``plastic``), so that a face's colours are
-    D_f t_fv + k x_fv; each face's rows and colours are projected off its column t_f (the Schur
-    complement of its D_f). The diffuse part dims towards grazing views just where the coat's
-    Fresnel reflection grows; a fit that took it as constant (None: t = 1, each face's mean
-    removed) would set the two against each other and find too weak a coat."""
-    return _fit_coat(face, rgb, rows, num_faces, loss, rounds, group, num_groups, transmission)[0]
-
-
-def choose_coat(face: np.ndarray, rgb: np.ndarray, candidates: list[tuple[np.ndarray, np.ndarray | None]],
-                num_faces: int, loss: str = "cauchy", group: np.ndarray | None = None,
-                num_groups: int = 1) -> tuple[int, np.ndarray]:
-    """Of the reflections ``candidates``, each (rows (N, 3), transmission (N,) or None) as
-    :func:`fit_coat` takes them, the one that explains the colours' changes across views best:
-    its index and weights (G, 3).
-
-    A dielectric coat dims the diffuse radiance it covers by its transmission 1 - F (Mitsuba's
-    ``plastic``); a glossy layer that adds its reflection on top (a Phong lobe) leaves it as it
-    is, and so does a matte surface (its weight near 0). Every fit takes one diffuse unknown
-    per face and the same weights, so the fits are judged alike: the robust loss's negative
-    log-likelihood of their residuals, at one scale (the least robust scale of them all)."""
-    fits = [_fit_coat(face, rgb, rows, num_faces, loss, 5, group, num_groups, dimmed) for rows, dimmed in candidates]
-    scale = min(robust.robust_scale(residual, floor=1e-12) for _, residual in fits)
-    index = int(np.argmin([robust.nll(residual, loss, scale) for _, residual in fits]))
-    return index, fits[index][0]
-
-
-def _fit_coat(face, rgb, rows, num_faces, loss, rounds, group, num_groups, transmission
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`fit_coat`'s weights (G, 3) and the final residual norm of each row (N,)."""
+    G = 1) times a grey coat's per-channel factor (:func:`grey_weights`): least squares on each
+    face's deviations from its mean over views, reweighted by ``loss`` (glints and shadows the
+    coat term does not explain). Groups let each part of an object that mixes materials
+    (matte, coated, glossy) take its own coat."""
+    counts = np.maximum(np.bincount(face, minlength=num_faces), 1).astype(float)
     group = np.zeros(len(face), dtype=np.int64) if group is None else group
-    t = np.ones(len(face)) if transmission is None else transmission
-    tt = np.maximum(np.bincount(face, t * t, minlength=num_faces), 1e-300)
 
-    def off_diffuse(values):
-        coef = np.stack([np.bincount(face, t * values[:, k], minlength=num_faces) for k in range(3)], 1) / tt[:, None]
-        return values - t[:, None] * coef[face]
+    def deviation(values):
+        mean = np.stack([np.bincount(face, values[:, k], minlength=num_faces) for k in range(3)], 1) / counts[:, None]
+        return values - mean[face]
 
     def group_sum(values):
         return np.stack([np.bincount(group, values[:, k], minlength=num_groups) for k in range(3)], 1)
 
-    x, y = off_diffuse(rows), off_diffuse(rgb)
+    x, y = deviation(rows), deviation(rgb)
     weights = np.ones(len(face))
     strength, colour = np.zeros(num_groups), np.zeros(3)
-    residual = np.linalg.norm(y, axis=1)
     for _ in range(rounds):
         wx = weights[:, None] * x
         strength, colour = grey_weights(group_sum(wx * y), group_sum(wx * x))
         residual = np.linalg.norm(y - (strength[group, None] * colour) * x, axis=1)
         weights = robust.irls_weights(residual, loss, robust.robust_scale(residual, floor=1e-12))
-    return strength[:, None] * colour, residual
+    return strength[:, None] * colour
 
 
 def grey_weights(xy: np.ndarray, xx: np.ndarray, rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:

@@ -88,22 +88,6 @@ def robust_scale(residuals: np.ndarray, weights: np.ndarray | None = None, floor
     return max(1.4826 * float(np.median(r)) if len(r) else floor, floor)
 
 
-def nll(residuals: np.ndarray, loss: str, scale: float) -> float:
-    """The negative log-likelihood (up to a constant) of residuals (N,) under ``loss`` at
-    ``scale``, u = r / (c scale): huber u^2/2 within 1, |u| - 1/2 beyond; cauchy
-    log(1 + u^2) / 2; tukey (1 - (1 - u^2)^3) / 6 within 1, 1/6 beyond; none u^2 / 2."""
-    if loss not in LOSSES:
-        raise InputError(f"robust loss must be one of {LOSSES}, got {loss!r}")
-    u = np.abs(residuals) / ((TUNING[loss] if loss in TUNING else 1.0) * scale)
-    if loss == "huber":
-        return float(np.sum(np.where(u <= 1.0, 0.5 * u * u, u - 0.5)))
-    if loss == "cauchy":
-        return float(np.sum(0.5 * np.log1p(u * u)))
-    if loss == "tukey":
-        return float(np.sum(np.where(u < 1.0, (1.0 - (1.0 - u * u) ** 3) / 6.0, 1.0 / 6.0)))
-    return float(np.sum(0.5 * u * u))
-
-
 def irls_weights(residuals: np.ndarray, loss: str, scale: float) -> np.ndarray:
     """(N,) IRLS weights w(r / (c scale)) of relative residuals (N,) for ``loss``.
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from estimator.core import sh
-from estimator.light.coat import admissible_scale, choose_coat, coat_rows, fit_coat, grey_weights, mirror_escapes
+from estimator.light.coat import admissible_scale, coat_rows, fit_coat, grey_weights, mirror_escapes
 from estimator.model.reflection import fresnel_dielectric, mirror_directions
 from estimator.rays.visibility import Visibility, sphere_sampling
 
@@ -80,65 +80,6 @@ def test_the_mean_levels_reflection_is_recovered_beside_any_diffuse():
     unit[0] = 1.0 / sh.basis(0, v[:1])[0, 0]                  # a light of radiance 1 in every direction
     k = fit_coat(face, rgb, coat_rows(n, v, unit, 0, 1.5, escapes), faces)
     np.testing.assert_allclose(k, level, rtol=1e-6)
-
-
-def test_the_reflection_is_recovered_beside_a_diffuse_dimmed_by_the_coat():
-    """Mitsuba's ``plastic``: the diffuse radiance leaves through the coat with 1 - F(n . v), so it
-    dims towards grazing views just where the reflection grows. Projecting each face's rows off
-    that transmission gives the level back; taking the diffuse as constant finds a weaker coat."""
-    rng = np.random.default_rng(8)
-    faces, views, level = 300, 12, 0.05
-    face = np.repeat(np.arange(faces), views)
-    n, v = _views_of_upward_faces(faces * views, 9)
-    fresnel = fresnel_dielectric(v[:, 1], 1.5)
-    rgb = rng.uniform(0.02, 0.8, size=(faces, 3))[face] * (1 - fresnel)[:, None] + level * fresnel[:, None]
-    unit = np.full((1, 3), 1.0 / sh.basis(0, v[:1])[0, 0])
-    rows = coat_rows(n, v, unit, 0, 1.5)
-    np.testing.assert_allclose(fit_coat(face, rgb, rows, faces, transmission=1 - fresnel), level, rtol=1e-6)
-    assert np.all(fit_coat(face, rgb, rows, faces) < 0.5 * level)
-
-
-def _coated_views(faces, views, seed):
-    """Faces of random normals seen from ``views`` random directions in front of each: face
-    index (N,), normals and unit directions to the camera (N, 3), and a light of a bright
-    region over a dimmer sky, SH to degree 4 (M, 3)."""
-    rng = np.random.default_rng(seed)
-    face = np.repeat(np.arange(faces), views)
-    n = rng.normal(size=(faces, 3))
-    n = (n / np.linalg.norm(n, axis=1, keepdims=True))[face]
-    v = rng.normal(size=(len(face), 3))
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    v = np.where(np.sum(v * n, 1, keepdims=True) < 0.3, -v, v)
-    v = np.where(np.sum(v * n, 1, keepdims=True) < 0.3, n, v)          # keep each view within ~72 degrees
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    light = sh.project_directional(4, np.array([[0.3, 0.8, 0.5]]) / np.linalg.norm([0.3, 0.8, 0.5]),
-                                   np.array([[2.0, 1.8, 1.5]]))
-    light[0] += [1.0, 1.0, 1.2]
-    return face, n, v, light
-
-
-def test_choose_coat_tells_a_dielectric_coat_from_a_layer_on_top():
-    """Colours of a coat over a diffuse radiance it dims (Mitsuba's plastic), of the same
-    reflection on top of an undimmed diffuse radiance, and of a matte surface: each chooses its
-    own model, with its weight; the matte surface takes a weight near 0, though the coat's fit
-    over a dimmed diffuse would take some from the diffuse radiance's missing Fresnel dimming."""
-    face, n, v, light = _coated_views(400, 16, 10)
-    faces = 400
-    rng = np.random.default_rng(11)
-    transmission = 1 - fresnel_dielectric(np.sum(n * v, 1), 1.5)
-    rows = coat_rows(n, v, light, 4, 1.5)
-    tried = [(rows, None), (rows, transmission)]
-    diffuse = rng.uniform(0.05, 0.8, size=(faces, 3))[face]
-    noise = 1e-4 * rng.normal(size=diffuse.shape)
-    index, weight = choose_coat(face, diffuse * transmission[:, None] + 0.7 * rows + noise, tried, faces)
-    assert index == 1
-    np.testing.assert_allclose(weight, 0.7, rtol=0.02)
-    index, weight = choose_coat(face, diffuse + 0.7 * rows + noise, tried, faces)
-    assert index == 0
-    np.testing.assert_allclose(weight, 0.7, rtol=0.02)
-    index, weight = choose_coat(face, diffuse + noise, tried, faces)
-    assert index == 0 and np.all(weight < 1e-3)
-    assert np.all(fit_coat(face, diffuse + noise, rows, faces, transmission=transmission) > 0.01)
 
 
 @pytest.mark.parametrize("true_k", [0.0, 0.05])

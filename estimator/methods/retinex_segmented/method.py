@@ -151,7 +151,6 @@ class RetinexSegmented(Method):
         c, obs = self.config, prep.obs
         normals = prep.data.mesh.face_normals[obs.face]
         escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
-        transmission = coat.transmission(normals, obs.view_dir, c.coat_ior)
         group, groups = coat_groups(est, c.coat_per_region)
         group = group[obs.face]
         level = c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1))
@@ -159,10 +158,8 @@ class RetinexSegmented(Method):
         for order in sorted({0, c.coat_order}):
             reflected = CoatReflection(est.light, np.ones((groups, 3)), order)
             rows = reflected.rows(normals, obs.view_dir, c.coat_ior, escapes)
-            # a dielectric coat dims the diffuse it covers; a layer on top (a Phong lobe, or a
-            # matte surface with a weight near 0) does not
-            _, weight = coat.choose_coat(obs.face, obs.rgb, [(rows, None), (rows, transmission)], obs.num_faces,
-                                         self.loss, group=group, num_groups=groups)
+            weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, group=group,
+                                   num_groups=groups)
             weight = weight * coat.admissible_scale(obs.rgb, weight[group] * rows, c.coat_max_negative,
                                                     group=group, num_groups=groups)[:, None]
             reflection = weight[group] * rows
