@@ -73,6 +73,8 @@ def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: 
 
     Returns the absolute output path. Raises :class:`OutputError` naming the folder.
     """
+    if not str(path).strip():   # an empty -o would resolve to the working directory
+        raise OutputError("the output path is empty; give -o a folder")
     out = os.path.realpath(os.path.abspath(str(path)))
     refuse_inputs(out, inputs)
     if os.path.lexists(out):

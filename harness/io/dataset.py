@@ -8,13 +8,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import zipfile
 from dataclasses import dataclass
 
 import numpy as np
 from PIL import Image
 
 from estimator import Camera, InputError, MultiViewData, TriangleMesh, View
+from harness.io.arrays import read_npz, real_array
 from harness.io.exr import read_exr, write_exr
 from harness.io.images import read_linear_rgb
 from harness.io.jsonio import load_json
@@ -131,9 +131,13 @@ def write_ground_truth(folder: str, truth: GroundTruth, envmap: np.ndarray | Non
 
 
 def _number(where: str, key: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise DatasetError(f"{where}: intrinsic '{key}' must be a finite number, got {value!r}")
-    return float(value)
+    try:   # an integer beyond a float's range (JSON integers are unbounded) overflows
+        number = None if isinstance(value, bool) or not isinstance(value, (int, float)) else float(value)
+    except OverflowError:
+        number = None
+    if number is None or not np.isfinite(number):
+        raise DatasetError(f"{where}: intrinsic '{key}' must be a finite number, got {str(value)[:40]}")
+    return number
 
 
 def _lens(where: str, frame: dict, top: dict) -> Lens | None:
@@ -167,7 +171,10 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
             angle = frame.get("camera_angle_x", top.get("camera_angle_x"))
             w = frame.get("w", top.get("w"))
             if angle is not None and w is not None:
-                value = 0.5 * _number(where, "w", w) / np.tan(0.5 * _number(where, "camera_angle_x", angle))
+                angle = _number(where, "camera_angle_x", angle)
+                if not 0 < angle < np.pi:
+                    raise DatasetError(f"{where}: camera_angle_x must lie in (0, pi) radians, got {angle:g}")
+                value = 0.5 * _number(where, "w", w) / np.tan(0.5 * angle)
         if key in ("cx", "cy") and value is None:
             size = frame.get("w" if key == "cx" else "h", top.get("w" if key == "cx" else "h"))
             value = None if size is None else 0.5 * _number(where, "w" if key == "cx" else "h", size)
@@ -223,6 +230,12 @@ def _undistorted(where: str, image: np.ndarray, cam: Camera, lens: Lens) -> np.n
         raise DatasetError(f"{where}: {exc}") from None
 
 
+def _image_path(file_path: str) -> str:
+    """A frame's image path as read: without an extension it names an EXR (nerfstudio's
+    ``file_path`` may leave the extension out)."""
+    return file_path if os.path.splitext(file_path)[1] else file_path + ".exr"
+
+
 def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[View]:
     """The views of a frame list; every image path read is appended to ``files``."""
     if not isinstance(frames, list):
@@ -236,9 +249,7 @@ def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[V
             raise DatasetError(f"{where}: file_path missing or not a string")
         cam = _intrinsics(where, frame, top)
         lens = _lens(where, frame, top)
-        path = os.path.join(folder, frame["file_path"])
-        if not os.path.splitext(path)[1]:
-            path += ".exr"
+        path = os.path.join(folder, _image_path(frame["file_path"]))
         if not os.path.isfile(path):
             raise DatasetError(f"{where}: image not found: {path}")
         image = read_frame_image(path)
@@ -256,30 +267,19 @@ def _read_views(folder: str, frames, top: dict, key: str, files: list) -> list[V
     return views
 
 
-def _load_npz(path: str) -> dict:
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            return {k: archive[k] for k in archive.files}
-    except FileNotFoundError:
-        raise DatasetError(f"{path} not found") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:   # a truncated archive is a BadZipFile
-        damaged = isinstance(exc, (OSError, EOFError, zipfile.BadZipFile))
-        reason = "not a .npz archive" if damaged or "pickle" in str(exc) else exc
-        raise DatasetError(f"{path}: unreadable ({reason})") from None
-
-
 def read_ground_truth(folder: str, num_faces: int) -> GroundTruth | None:
     """ground_truth/ of a dataset, or None when it has none. Every missing file or key,
     wrong shape and non-finite value raises :class:`DatasetError` naming the file and key."""
     gt = os.path.join(folder, "ground_truth")
     if not os.path.isdir(gt):
         return None
-    mats = _load_npz(os.path.join(gt, "materials.npz"))
-    shz = _load_npz(os.path.join(gt, "illumination_sh.npz"))
+    mats = read_npz(os.path.join(gt, "materials.npz"), DatasetError)
+    shz = read_npz(os.path.join(gt, "illumination_sh.npz"), DatasetError)
     info = load_json(os.path.join(gt, "illumination.json"), "ground-truth illumination", DatasetError)
     for key in ("diffuse", "specular"):
         if key not in mats:
             raise DatasetError(f"{gt}/materials.npz: key '{key}' missing")
+        mats[key] = real_array(f"{gt}/materials.npz: {key}", mats[key], DatasetError)
         if mats[key].shape != (num_faces, 3):
             raise DatasetError(f"{gt}/materials.npz: {key} has shape {mats[key].shape}, mesh has {num_faces} faces")
         bad = ~np.all(np.isfinite(mats[key]), axis=1)
@@ -289,7 +289,7 @@ def read_ground_truth(folder: str, num_faces: int) -> GroundTruth | None:
     key = "radiance_sh" if "radiance_sh" in shz else "sh"  # format 1 named it sh
     if key not in shz:
         raise DatasetError(f"{gt}/illumination_sh.npz: key 'radiance_sh' missing")
-    radiance = np.asarray(shz[key], dtype=np.float64)
+    radiance = real_array(f"{gt}/illumination_sh.npz: {key}", shz[key], DatasetError)
     if radiance.ndim != 2 or radiance.shape[1] != 3 or int(np.sqrt(radiance.shape[0])) ** 2 != radiance.shape[0]:
         raise DatasetError(f"{gt}/illumination_sh.npz: {key} must be ((L+1)^2, 3), got {radiance.shape}")
     if not np.all(np.isfinite(radiance)):
@@ -325,7 +325,7 @@ def _check_distinct_frames(tpath: str, frames, test_frames) -> None:
             path = frame.get("file_path") if isinstance(frame, dict) else None
             if not isinstance(path, str):
                 continue
-            path = os.path.normpath(path)
+            path = os.path.normpath(_image_path(path))
             if path in seen:
                 raise DatasetError(f"{tpath}: {key}[{k}] lists {frame['file_path']!r} again ({seen[path]}): each image "
                                    "may appear once, and a test frame never among the training frames")

@@ -19,7 +19,12 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) ->
         raise InputError(f"EXR image must be (H, W, 3) or (H, W, 4), got {image.shape}")
     if not np.all(np.isfinite(image)):
         raise InputError(f"refusing to write NaN/Inf pixels to {path}")
-    data = np.ascontiguousarray(image, dtype=np.float16 if half else np.float32)
+    kind = np.float16 if half else np.float32
+    largest, limit = float(np.max(np.abs(image), initial=0.0)), float(np.finfo(kind).max)
+    if largest > limit:   # it would be stored as Inf
+        raise InputError(f"refusing to write {path}: a pixel of magnitude {largest:.3g} exceeds the "
+                         f"{np.dtype(kind).name} EXR's range ({limit:.3g})")
+    data = np.ascontiguousarray(image, dtype=kind)
     name = "RGBA" if data.shape[2] == 4 else "RGB"
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     try:

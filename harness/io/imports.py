@@ -15,11 +15,11 @@ from __future__ import annotations
 import csv
 import os
 import xml.etree.ElementTree as ET
-import zipfile
 
 import numpy as np
 
 from estimator import Estimate, EstimatorConfig, InputError, TriangleMesh, fresnel_dielectric, sh
+from harness.io.arrays import read_npz, real_array
 from harness.io.images import read_linear_rgb
 from harness.io.mesh import load_mesh_with_uv
 
@@ -27,18 +27,8 @@ FORMATS = ("per-face", "uv-textures", "mitsuba-xml")
 CHANNELS = ("r", "g", "b")
 
 
-def _floats(where: str, value) -> np.ndarray:
-    try:
-        array = np.asarray(value)
-        if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
-            raise TypeError(array.dtype)
-        return array.astype(np.float64)
-    except (TypeError, ValueError):
-        raise InputError(f"{where} must hold real numbers, got {np.asarray(value).dtype}") from None
-
-
 def _per_face_array(where: str, value, num_faces: int) -> np.ndarray:
-    array = _floats(where, value)
+    array = real_array(where, value)
     if array.shape != (num_faces, 3):
         raise InputError(f"{where} must be ({num_faces}, 3) for the dataset's {num_faces} faces, got {array.shape}")
     if not np.all(np.isfinite(array)):
@@ -58,11 +48,7 @@ def read_per_face(path: str, num_faces: int) -> dict:  # noqa: C901  (one check 
         raise InputError(f"per-face file not found: {path}")
     out = {"diffuse": None, "specular": None, "radiance_sh": None, "pseudo_sh": None}
     if path.lower().endswith(".npz"):
-        try:
-            with np.load(path, allow_pickle=False) as archive:
-                data = {k: archive[k] for k in archive.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile):
-            raise InputError(f"{path}: unreadable (not a .npz archive)") from None
+        data = read_npz(path)
         if "diffuse" not in data:
             raise InputError(f"{path}: key 'diffuse' missing (per-face (F, 3) albedo)")
         for key in ("diffuse", "specular"):
@@ -70,7 +56,7 @@ def read_per_face(path: str, num_faces: int) -> dict:  # noqa: C901  (one check 
                 out[key] = _per_face_array(f"{path}: {key}", data[key], num_faces)
         for key in ("radiance_sh", "pseudo_sh"):
             if key in data:
-                coeffs = _floats(f"{path}: {key}", data[key])
+                coeffs = real_array(f"{path}: {key}", data[key])
                 if (
                     coeffs.ndim != 2
                     or len(coeffs) == 0
@@ -431,8 +417,10 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
     labels[observed] = np.unique(np.hstack([diffuse, specular])[observed], axis=0, return_inverse=True)[1].ravel()
     info = {"imported_from": source, "clusters": int(labels.max() + 1)}
     with np.errstate(over="ignore", invalid="ignore"):
-        finite = all(np.all(np.isfinite(a)) for a in (diffuse * dc, specular * dc, pseudo / dc))
-    if not finite:
-        raise InputError(f"{source}: the albedos times the light's DC overflow (values too large)")
-    return Estimate(diffuse * dc, specular * dc, pseudo / dc, labels, observed, f"imported-{source.split(':')[0]}",
+        scaled = (diffuse * dc, specular * dc)
+        finite = all(np.all(np.isfinite(a[observed])) for a in scaled) and np.all(np.isfinite(pseudo / dc))
+    if not finite or any(np.any(a[observed] > MAX_IMPORTED_ALBEDO) for a in scaled):
+        raise InputError(f"{source}: the albedos times the light's mean (DC) {dc.tolist()} exceed "
+                         f"{MAX_IMPORTED_ALBEDO:g} (the light's scale is too large for a reflectance)")
+    return Estimate(scaled[0], scaled[1], pseudo / dc, labels, observed, f"imported-{source.split(':')[0]}",
                     config, info)

@@ -4,12 +4,12 @@ from __future__ import annotations
 import dataclasses
 import os
 import platform
-import zipfile
 from importlib import metadata
 
 import numpy as np
 
 from estimator import DEFAULT_METHOD, Estimate, EstimatorConfig, InputError, get_method, sh
+from harness.io.arrays import read_npz, real_array
 from harness.io.atomic import atomic_directory
 from harness.io.exr import write_exr
 from harness.io.jsonio import dump_json, load_json
@@ -21,6 +21,25 @@ RUN_FORMAT_VERSION = 2  # 2: estimate.npz names the pseudo illumination pseudo_s
 
 class RunError(InputError):
     """A run folder that is missing or malformed."""
+
+
+# the figures of run.json that a report prints as numbers (dotted paths; each may be absent or null)
+REPORTED_NUMBERS = ("trust.residual.median_relative", "trust.outlier_share", "trust.light_condition",
+                    "trust.albedo_relative_se.median", "cross_validation.psnr")
+
+
+def _check_report_numbers(path: str, run: dict) -> None:
+    """``trust`` and ``cross_validation`` of run.json at ``path``, where present, are objects,
+    and each of :data:`REPORTED_NUMBERS` along them is a number or null."""
+    for key in ("trust", "cross_validation"):
+        if run.get(key) is not None and not isinstance(run[key], dict):
+            raise RunError(f"{path}: '{key}' must be an object, got {str(run[key])[:60]!r}")
+    for dotted in REPORTED_NUMBERS:
+        node = run
+        for part in dotted.split("."):
+            node = node.get(part) if isinstance(node, dict) else None
+        if node is not None and (isinstance(node, bool) or not isinstance(node, (int, float))):
+            raise RunError(f"{path}: '{dotted}' must be a number, got {str(node)[:60]!r}")
 
 
 def estimator_settings(meta: dict, method: str | None = None, overrides: dict | None = None
@@ -144,20 +163,17 @@ def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check pe
     warnings = run.get("warnings", [])
     if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
         raise RunError(f"{js}: 'warnings' must be a list of strings, got {str(warnings)[:60]!r}")
-    try:
-        with np.load(npz, allow_pickle=False) as archive:
-            data = {k: archive[k] for k in archive.files}
-    except (PermissionError, IsADirectoryError) as exc:
-        raise RunError(f"{npz}: cannot read it ({exc.strerror})") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile):   # a truncated archive is a BadZipFile
-        raise RunError(f"{npz}: unreadable (not a .npz archive)") from None
+    _check_report_numbers(js, run)
+    data = read_npz(npz, RunError)
     pseudo_key = "sh" if "sh" in data and "pseudo_sh" not in data else "pseudo_sh"   # run format 1 named it sh
     for key in ("diffuse", "specular", pseudo_key, "labels", "observed"):
         if key not in data:
             raise RunError(f"{npz}: key '{key}' missing")
     for key in ("diffuse", "specular", pseudo_key, "radiance_sh"):
-        if key in data and not np.all(np.isfinite(data[key])):
-            raise RunError(f"{npz}: {key} contains NaN or Inf")
+        if key in data:
+            data[key] = real_array(f"{npz}: {key}", data[key], RunError)
+            if not np.all(np.isfinite(data[key])):
+                raise RunError(f"{npz}: {key} contains NaN or Inf")
     f = data["diffuse"].shape[0] if data["diffuse"].ndim == 2 else -1
     if f < 1 or data["diffuse"].shape != (f, 3) or data["specular"].shape != (f, 3) or data["labels"].shape != (f,) \
             or data["observed"].shape != (f,):
@@ -165,6 +181,15 @@ def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check pe
     if not np.issubdtype(data["labels"].dtype, np.integer) or data["observed"].dtype != bool:
         raise RunError(f"{npz}: labels must be integers and observed booleans, got {data['labels'].dtype} "
                        f"and {data['observed'].dtype}")
+    if data["labels"].min() < -1 or data["labels"].max() >= f:
+        raise RunError(f"{npz}: labels must lie in [-1, {f}) (a region or cluster of the {f} faces, -1 none), got "
+                       f"{data['labels'].min()} to {data['labels'].max()}")
+    if not data["observed"].any():
+        raise RunError(f"{npz}: observed is false for every face: the run estimated nothing")
+    negative = data["observed"] & np.any(data["diffuse"] + data["specular"] < 0, axis=1)
+    if negative.any():   # the estimator marks such a face unestimated (estimator.diagnostics.screening)
+        raise RunError(f"{npz}: {int(negative.sum())} observed faces have a negative albedo (diffuse + specular; "
+                       f"first: face {int(np.argmax(negative))})")
     for key in (pseudo_key, "radiance_sh"):
         if key in data and (data[key].ndim != 2 or data[key].shape[1] != 3
                             or int(np.sqrt(data[key].shape[0])) ** 2 != data[key].shape[0]):

@@ -889,3 +889,109 @@ def test_a_binary_obj_is_a_one_line_error(tmp_path):
     path.write_bytes(np.random.default_rng(0).integers(0, 256, 3000, dtype=np.uint8).tobytes())
     with pytest.raises(InputError, match=r"cannot read mesh file .*mesh\.obj"):
         load_mesh_file(path)
+
+
+# ---------------------------------------------------------------- issue 25/27 session, hostile-input run
+
+def test_text_arrays_a_bare_npy_and_out_of_range_labels_in_a_run_are_refused(copy, capsys):
+    """Arrays of text, a .npy saved under the .npz name, labels beyond the faces, a run that
+    estimated nothing and a negative albedo each stop with one line naming the file and key."""
+    ds, run, _ = copy
+    out = run.parent / "rep2"
+    good = dict(np.load(run / "estimate.npz"))
+    negative = good["diffuse"].copy()
+    negative[np.argmax(good["observed"])] = -5.0
+    for key, value, needle in (("diffuse", good["diffuse"].astype(str), "diffuse must hold real numbers"),
+                               ("pseudo_sh", good["pseudo_sh"].astype(complex), "pseudo_sh must hold real numbers"),
+                               ("labels", np.full(80, 10 ** 12), "labels must lie in [-1, 80)"),
+                               ("observed", np.zeros(80, bool), "estimated nothing"),
+                               ("diffuse", negative, "have a negative albedo")):
+        np.savez(run / "estimate.npz", **{**good, key: value})
+        expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "estimate.npz", needle,
+                     inputs=[run, ds], absent=[out])
+    np.save(run / "bare.npy", good["diffuse"])
+    os.replace(run / "bare.npy", run / "estimate.npz")
+    for command in (["report", run, "-o", out, "--no-mitsuba"], ["render", run, "-o", out]):
+        expect_error(capsys, command, "estimate.npz", "a single .npy array", inputs=[run, ds], absent=[out])
+
+
+def test_text_ground_truth_and_a_bare_npy_per_face_file_are_refused(copy, tmp_path, capsys):
+    ds, run, _ = copy
+    mats = dict(np.load(ds / "ground_truth" / "materials.npz"))
+    np.savez(ds / "ground_truth" / "materials.npz", **{**mats, "diffuse": mats["diffuse"].astype(str)})
+    expect_error(capsys, ["report", run, "-o", tmp_path / "r", "--no-mitsuba"], "materials.npz",
+                 "diffuse must hold real numbers", inputs=[run, ds], absent=[tmp_path / "r"])
+    np.save(tmp_path / "faces.npy", mats["diffuse"])
+    os.replace(tmp_path / "faces.npy", tmp_path / "faces.npz")
+    expect_error(capsys, ["import", ds, "--from", "per-face", "--file", tmp_path / "faces.npz", "-o", tmp_path / "x"],
+                 "faces.npz", "a single .npy array", inputs=[ds], absent=[tmp_path / "x"])
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda run: run.update(cross_validation=[1]), "'cross_validation' must be an object"),
+    (lambda run: run.update(cross_validation={"psnr": "x"}), "'cross_validation.psnr' must be a number"),
+    (lambda run: run.setdefault("trust", {}).update(outlier_share="high"), "'trust.outlier_share' must be a number"),
+])
+def test_report_numbers_of_run_json_are_checked(copy, tmp_path, capsys, edit, needle):
+    ds, run, _ = copy
+    record = json.loads((run / "run.json").read_text())
+    edit(record)
+    (run / "run.json").write_text(json.dumps(record))
+    expect_error(capsys, ["report", run, "-o", tmp_path / "r", "--no-mitsuba"], "run.json", needle,
+                 inputs=[run, ds], absent=[tmp_path / "r"])
+
+
+def test_an_intrinsic_integer_beyond_a_float_is_one_line(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    record = json.loads((ds / "transforms.json").read_text())
+    record["w"] = 10 ** 400
+    (ds / "transforms.json").write_text(json.dumps(record))
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "intrinsic 'w' must be a finite number",
+                 inputs=[ds], absent=[tmp_path / "r"])
+
+
+def test_a_frame_listed_again_without_its_extension_is_refused(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    record = json.loads((ds / "transforms.json").read_text())
+    twin = dict(record["frames"][0], file_path=record["frames"][0]["file_path"].removesuffix(".exr"))
+    record["frames"].append(twin)
+    (ds / "transforms.json").write_text(json.dumps(record))
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "again (frames[0])", inputs=[ds],
+                 absent=[tmp_path / "r"])
+
+
+def test_a_light_that_scales_albedos_beyond_a_reflectance_is_refused_on_import(copy, tmp_path, capsys):
+    ds, run, _ = copy
+    arrays = dict(np.load(run / "estimate.npz"))
+    np.savez(tmp_path / "faces.npz", diffuse=arrays["diffuse"], pseudo_sh=arrays["pseudo_sh"] * 1e300)
+    expect_error(capsys, ["import", ds, "--from", "per-face", "--file", tmp_path / "faces.npz", "-o", tmp_path / "x"],
+                 "the light's scale is too large", inputs=[ds], absent=[tmp_path / "x"])
+
+
+def test_an_exr_pixel_beyond_its_float_range_is_refused():
+    from estimator import InputError
+    from harness.io.exr import write_exr
+    image = np.ones((2, 2, 3))
+    image[0, 0, 1] = 1e39
+    with pytest.raises(InputError, match="exceeds the float32 EXR's range"):
+        write_exr("never-written.exr", image)
+    image[0, 0, 1] = 7e4
+    with pytest.raises(InputError, match="float16"):
+        write_exr("never-written.exr", image, half=True)
+    assert not os.path.exists("never-written.exr")
+
+
+def test_an_empty_output_path_and_a_zero_field_of_view_are_one_line(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    expect_error(capsys, ["estimate", ds, "-o", ""], "the output path is empty", inputs=[ds])
+    record = json.loads((ds / "transforms.json").read_text())
+    record.pop("fl_x", None)
+    record.pop("fl_y", None)
+    for frame in record["frames"] + record["test_frames"]:
+        frame.pop("fl_x", None)
+        frame.pop("fl_y", None)
+    record["camera_angle_x"] = 0
+    (ds / "transforms.json").write_text(json.dumps(record))
+    with np.errstate(all="raise"):   # no numpy warning line before the error
+        expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "camera_angle_x must lie in (0, pi)",
+                     inputs=[ds], absent=[tmp_path / "r"])
