@@ -41,7 +41,7 @@ class ClusteredConfig(Section):
 
     def check(self):
         return [
-            (self.bandwidth > 0 and self.split_bandwidth > 0, "bandwidths must be > 0"),
+            (self.bandwidth > 0 and self.split_bandwidth > 0, "bandwidth and split_bandwidth must be > 0"),
             (0 <= self.min_brightness < 1, "min_brightness must lie in [0, 1)"),
             (0 <= self.min_cluster_fraction < 0.5, "min_cluster_fraction must lie in [0, 0.5)"),
             (self.recluster_rounds >= 1, "recluster_rounds must be >= 1"),

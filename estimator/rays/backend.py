@@ -42,6 +42,10 @@ class BackendConfig(Section):
 
     variant: str | None = None
 
+    def check(self):
+        return [(self.variant in (None, "", "auto", *VARIANTS),
+                 f"variant must be one of {', '.join(VARIANTS)} or 'auto', got {self.variant!r}")]
+
 
 class BackendError(InputError):
     """No usable Dr.Jit backend for the requested variant."""

@@ -792,6 +792,10 @@ def test_a_bad_flag_value_is_refused_naming_the_flag(copy, tmp_path, capsys):
                  absent=[tmp_path / "x"])
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--sh-order", "99"],
                  "--sh-order: estimator config: sh_order must lie in", inputs=[ds], absent=[tmp_path / "x"])
+    for setting, needle in (("variant=foo", "--set variant: estimator config: variant must be one of"),
+                            ("bandwidth=-1", "--set bandwidth: estimator config: bandwidth and split_bandwidth")):
+        expect_error(capsys, ["estimate", ds, "-o", tmp_path / "x", "--set", setting], needle, inputs=[ds],
+                     absent=[tmp_path / "x"])
 
 
 def test_baseline_dataset_size_and_run_warnings_are_checked(copy, tmp_path, capsys):
