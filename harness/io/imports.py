@@ -418,8 +418,8 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
     info = {"imported_from": source, "clusters": int(labels.max() + 1)}
     with np.errstate(over="ignore", invalid="ignore"):
         scaled = (diffuse * dc, specular * dc)
-        finite = all(np.all(np.isfinite(a[observed])) for a in scaled) and np.all(np.isfinite(pseudo / dc))
-    if not finite or any(np.any(a[observed] > MAX_IMPORTED_ALBEDO) for a in scaled):
+        finite = all(np.all(np.isfinite(a)) for a in scaled) and np.all(np.isfinite(pseudo / dc))
+    if not finite or any(np.any(a > MAX_IMPORTED_ALBEDO) for a in scaled):
         raise InputError(f"{source}: the albedos times the light's mean (DC) {dc.tolist()} exceed "
                          f"{MAX_IMPORTED_ALBEDO:g} (the light's scale is too large for a reflectance)")
     return Estimate(scaled[0], scaled[1], pseudo / dc, labels, observed, f"imported-{source.split(':')[0]}",
