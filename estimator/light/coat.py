@@ -15,6 +15,12 @@ Fresnel factor and the object's own blocking of r (s_f(r): 1 where r escapes the
 where the object blocks it, :func:`mirror_escapes`) modulate; higher degrees follow the
 light's broad shape.
 k >= 0 per channel; a bare diffuse surface gives k ~ 0 and is left unchanged.
+
+A glossy lobe without Fresnel (the paper's Phong: paints, glazes) reflects the same light
+blurred by its lobe, alike at every view angle: x_fv = P_n(r_fv) s_f(r_fv), P_n the light
+filtered by the normalised Phong lobe of exponent n (:func:`lobe_rows`). Its exponent is the
+one of :data:`LOBE_EXPONENTS` whose rows leave the least of the colours' changes unexplained
+(:func:`unexplained_cost`).
 """
 from __future__ import annotations
 
@@ -27,6 +33,14 @@ from ..core.settings import Section
 from ..model.reflection import fresnel_dielectric, mirror_directions, mirror_shadow
 from ..rays.visibility import SphereSampling, Visibility
 from ..solvers import robust
+
+# the Phong exponents a coat's lobe is chosen among: factors of sqrt(2) from the broad lobe of
+# a satin paint (5) to 80, beyond which an order-10 light cannot tell lobes apart (the filter
+# of exponent 80 still passes half of degree 10: :func:`estimator.core.sh.phong_filter`)
+LOBE_EXPONENTS = (5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0, 56.0, 80.0)
+# observations per chunk of the lobe rows: the (chunk, M) SH basis at the mirror directions
+# stays about 60 MB at order 10
+LOBE_CHUNK = 65_536
 
 
 @dataclass
@@ -48,6 +62,14 @@ class CoatConfig(Section):
         14.0 dB of PSNR summed over the seeds (median 33.8 -> 32.8 dB); on the rough-coated seed
         1000 the rows of degrees 3 and 4 explain the true reflection (rendered alone) best, 61-78 %
         of its variance, against 46-70 % at 2 and 32-51 % at 6.
+    coat_lobe : also try a Phong lobe's reflection (no Fresnel factor, the light filtered by the
+        lobe of the exponent that best explains the colours' changes across views), beside the
+        dielectric coat's two; the decision's criterion keeps one of them or none. Off by
+        default: on 20 development seeds of the random family it gained 3.7 dB of PSNR summed
+        (1.5 dB on two rough coats), on the 20 validation seeds 1040-1059 it lost 3.4 dB summed
+        (-5.4 and -4.1 dB on a rough coat under a sun and a broad Phong lobe, whose lobe
+        predicted the colours far better: a lobe that explains the changes across views can
+        still subtract the wrong view-independent level).
     coat_min_share : the coat is removed only when its median share of the colours exceeds this.
     coat_max_negative : the fitted weight is scaled down until subtracting it turns at most
         this share more of the observations non-positive (a coat cannot reflect more than a
@@ -58,6 +80,7 @@ class CoatConfig(Section):
     coat_per_region: bool = False
     coat_ior: float = 1.5
     coat_order: int = 4
+    coat_lobe: bool = False
     coat_min_share: float = 0.005
     coat_max_negative: float = 0.005
 
@@ -85,6 +108,26 @@ def coat_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, orde
     return factor[:, None] * low
 
 
+def lobe_rows(normals: np.ndarray, view_dir: np.ndarray, light: np.ndarray, exponents,
+              escapes: np.ndarray | None = None) -> np.ndarray:
+    """(E, N, 3) a Phong lobe's reflection per unit weight, P_n(r) s(r), of observations with
+    face normals (N, 3) and unit directions to the camera (N, 3), for each of the ``exponents``
+    (E,): the light (M, 3) SH filtered by the normalised lobe of exponent n
+    (:func:`estimator.core.sh.phong_filtered`) at the mirror direction r, times ``escapes``
+    (N,) s(r) (None: 1). No Fresnel factor: the lobe reflects every view angle alike. The SH
+    basis is evaluated once for all exponents, :data:`LOBE_CHUNK` observations at a time."""
+    order = sh.order_of(light.shape[0])
+    filtered = np.concatenate([sh.phong_filtered(light, n) for n in exponents], axis=1)   # (M, 3E)
+    mirror = mirror_directions(normals, view_dir)
+    out = np.empty((len(mirror), filtered.shape[1]))
+    for start in range(0, len(mirror), LOBE_CHUNK):
+        part = slice(start, start + LOBE_CHUNK)
+        out[part] = sh.basis(order, mirror[part]) @ filtered
+    if escapes is not None:
+        out *= escapes[:, None]
+    return out.reshape(len(mirror), len(exponents), 3).transpose(1, 0, 2)
+
+
 def mirror_escapes(face: np.ndarray, normals: np.ndarray, view_dir: np.ndarray, sampling: SphereSampling,
                    visibility: Visibility) -> np.ndarray:
     """(N,) 1.0 where the mirror direction of observation k (face ``face`` (N,), its normal
@@ -101,17 +144,12 @@ def fit_coat(face: np.ndarray, rgb: np.ndarray, rows: np.ndarray, num_faces: int
     face's deviations from its mean over views, reweighted by ``loss`` (glints and shadows the
     coat term does not explain). Groups let each part of an object that mixes materials
     (matte, coated, glossy) take its own coat."""
-    counts = np.maximum(np.bincount(face, minlength=num_faces), 1).astype(float)
     group = np.zeros(len(face), dtype=np.int64) if group is None else group
-
-    def deviation(values):
-        mean = np.stack([np.bincount(face, values[:, k], minlength=num_faces) for k in range(3)], 1) / counts[:, None]
-        return values - mean[face]
 
     def group_sum(values):
         return np.stack([np.bincount(group, values[:, k], minlength=num_groups) for k in range(3)], 1)
 
-    x, y = deviation(rows), deviation(rgb)
+    x, y = view_changes(face, rows, num_faces), view_changes(face, rgb, num_faces)
     weights = np.ones(len(face))
     strength, colour = np.zeros(num_groups), np.zeros(3)
     for _ in range(rounds):
@@ -120,6 +158,25 @@ def fit_coat(face: np.ndarray, rgb: np.ndarray, rows: np.ndarray, num_faces: int
         residual = np.linalg.norm(y - (strength[group, None] * colour) * x, axis=1)
         weights = robust.irls_weights(residual, loss, robust.robust_scale(residual, floor=1e-12))
     return strength[:, None] * colour
+
+
+def view_changes(face: np.ndarray, values: np.ndarray, num_faces: int) -> np.ndarray:
+    """(N, 3) each observation's ``values`` (N, 3) less their mean over the observations of
+    its face ``face`` (N,): what changes across views (a view-independent term cancels)."""
+    counts = np.maximum(np.bincount(face, minlength=num_faces), 1).astype(float)
+    mean = np.stack([np.bincount(face, values[:, k], minlength=num_faces) for k in range(3)], 1) / counts[:, None]
+    return values - mean[face]
+
+
+def unexplained_cost(face: np.ndarray, rgb: np.ndarray, reflections: list[np.ndarray], num_faces: int) -> np.ndarray:
+    """(R,) how much of the colours' changes across views each reflection (N, 3) (rows times
+    their fitted weights) leaves unexplained: the Cauchy cost sum log(1 + (e / s)^2) of the
+    residual norms e, s the robust scale of the changes themselves (one scale, so the
+    reflections compare)."""
+    changes = view_changes(face, rgb, num_faces)
+    scale = robust.robust_scale(np.linalg.norm(changes, axis=1), floor=1e-12)
+    return np.array([np.sum(np.log1p((np.linalg.norm(changes - view_changes(face, r, num_faces), axis=1)
+                                      / scale) ** 2)) for r in reflections])
 
 
 def grey_weights(xy: np.ndarray, xx: np.ndarray, rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:

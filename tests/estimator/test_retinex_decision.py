@@ -163,21 +163,22 @@ def test_the_default_reports_its_stages_as_it_goes():
     assert "light" in stages and stages.index("observations:") < stages.index("light")
 
 
-@pytest.mark.parametrize("level", [0.0, 2.0])
-def test_the_coat_correction_keeps_the_cheapest_of_its_reflections(level):
+@pytest.mark.parametrize("level, lobe", [(0.0, False), (2.0, False), (2.0, True)])
+def test_the_coat_correction_keeps_the_cheapest_of_its_reflections(level, lobe):
     """The matte micro scene's colours with a coat's reflection of an even environment of
     ``level`` added (the Fresnel factor where the mirror direction escapes the object): the
     coat's reflections of the environment's mean level (degree 0) and of the light's low orders
-    are each removed and judged with the uncorrected fit by the prediction cost; the cheapest
-    is kept and reported. Without a reflection the correction is not applied."""
+    (and, with ``coat_lobe``, a Phong lobe's) are each removed and judged with the uncorrected
+    fit by the prediction cost; the cheapest is kept and reported. Without a reflection the
+    correction is not applied."""
     from dataclasses import replace
 
-    from estimator.light.coat import mirror_escapes
+    from estimator.light.coat import LOBE_EXPONENTS, mirror_escapes
     from estimator.methods.retinex_segmented.method import RetinexSegmented
     from estimator.model.reflection import fresnel_dielectric
     from estimator.pipeline.prepared import prepare
 
-    config = micro_config()
+    config = replace(micro_config(), coat_lobe=lobe)
     data, _ = micro_scene(config, specular=0.0)
     prep = prepare(data, config)
     obs = prep.obs
@@ -187,14 +188,18 @@ def test_the_coat_correction_keeps_the_cheapest_of_its_reflections(level):
     prep = replace(prep, obs=replace(obs, rgb=obs.rgb + reflection[:, None]))
     info = RetinexSegmented(config).solve_held(prep).estimate.info
     costs = info["coat_costs"]
-    assert costs is None or (set(costs) <= {"none", "degree 0", f"degree {config.coat_order}"} and "none" in costs)
+    names = {"none", "degree 0", f"degree {config.coat_order}"} | {f"lobe {n:g}" for n in LOBE_EXPONENTS}
+    assert costs is None or (set(costs) <= names and "none" in costs)
     if level == 0:   # nothing reflects: no correction is tried, or none is kept
         assert costs is None or min(costs, key=costs.get) == "none"
-        assert info["coat_degree"] is None and not np.any(info["coat_weight"])
+        assert info["coat_degree"] is None and info["coat_exponent"] is None and not np.any(info["coat_weight"])
     else:
         kept = min(costs, key=costs.get)
-        assert len(costs) == 3 and kept != "none"
-        assert kept == f"degree {info['coat_degree']}" and np.all(np.array(info["coat_weight"]) > 0)
+        assert {"none", "degree 0", f"degree {config.coat_order}"} <= set(costs) and kept != "none"
+        assert any(name.startswith("lobe") for name in costs) == lobe   # the lobe is tried only when asked for
+        exponent = info["coat_exponent"]
+        assert kept == (f"degree {info['coat_degree']}" if exponent is None else f"lobe {exponent:g}")
+        assert np.all(np.array(info["coat_weight"]) > 0)
 
 
 def test_a_refit_offers_the_first_fits_regions_and_the_glossy_micro_scene_gains():

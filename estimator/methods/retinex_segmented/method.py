@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ...core import sh
 from ...core.errors import InputError
 from ...core.reductions import group_quantile
 from ...core.settings import Section
@@ -17,6 +18,12 @@ from .clusters import carried, cluster_count, solve_on_clusters
 from .decision import choose, light_hypotheses, prediction_cost
 from .result import to_estimate
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
+
+
+def coat_name(reflected: CoatReflection) -> str:
+    """How ``run.json``'s ``coat_costs`` names a coat's reflection: 'degree N' (a dielectric
+    coat's, of the light to degree N) or 'lobe N' (a Phong lobe's of exponent N)."""
+    return f"degree {reflected.order}" if reflected.exponent is None else f"lobe {reflected.exponent:g}"
 
 
 @dataclass
@@ -77,8 +84,10 @@ class RetinexSegmented(Method):
     5. The specular albedo is solved with that light fixed (per region; faces outside every
        region share the regions' median, or, without regions, the median of every face's own fit).
     6. With ``coat_correction``, the reflection of a dielectric coat (``coat_ior``) of the
-       environment's mean level (where the mirror direction escapes the object) and, apart, of
-       the light's low orders (``coat_order``) is fitted to the colours' changes across views
+       environment's mean level (where the mirror direction escapes the object), apart, of
+       the light's low orders (``coat_order``) and, with ``coat_lobe``, a Phong lobe's (no
+       Fresnel factor; its exponent the one whose rows explain the changes best) are each
+       fitted to the colours' changes across views
        (:mod:`estimator.light.coat`), with ``coat_per_region`` a grey coat's strength per
        uniform region (a matte part takes none; the other faces share one), scaled down until
        at most ``coat_max_negative`` more of the observations would turn non-positive,
@@ -133,20 +142,22 @@ class RetinexSegmented(Method):
             if applied is not None:
                 weight = applied.weight
         est.info["coat_degree"] = None if applied is None else applied.order
+        est.info["coat_exponent"] = None if applied is None else applied.exponent
         est.info["coat_weight"] = weight.tolist()
         est.info["clustering_s"] = time.perf_counter() - t
         return Solution(est, chosen, applied, fits)
 
     def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis, t: float,
                       keep_regions: bool = True) -> tuple[Estimate, Hypothesis, CoatReflection | None]:
-        """Step 6: the coat's reflection of the environment's mean level (SH degree 0) and of the
-        light's low orders (``coat_order``), each fitted to the colours' changes across views,
+        """Step 6: the coat's reflection of the environment's mean level (SH degree 0), of the
+        light's low orders (``coat_order``) and, with ``coat_lobe``, a Phong lobe's
+        (:meth:`_lobe_shape`), each fitted to the colours' changes across views,
         scaled down to ``coat_max_negative``, subtracted, and steps 1-5 run again (reusing the
         sun found the first time; with ``keep_regions`` the first fit's regions, tied as they
         are, are one more hypothesis); the uncorrected and the corrected fits are judged by
         :func:`.decision.prediction_cost` on the colours as observed (each coat's reflection
         added back, one unknown per region's strength and two for the grey coat's shared
-        colour: three with one group). Returns the estimate kept, its hypothesis and the
+        colour: three with one group; the lobe's exponent one more). Returns the estimate kept, its hypothesis and the
         reflection subtracted before it (None: none)."""
         c, obs = self.config, prep.obs
         normals = prep.data.mesh.face_normals[obs.face]
@@ -154,10 +165,13 @@ class RetinexSegmented(Method):
         group, groups = coat_groups(est, c.coat_per_region)
         group = group[obs.face]
         level = c.coat_min_share * np.median(np.linalg.norm(obs.rgb, axis=1))
+        shapes = [(CoatReflection(est.light, np.ones((groups, 3)), order), None)
+                  for order in sorted({0, c.coat_order})]
+        if c.coat_lobe:
+            shapes.append(self._lobe_shape(obs, normals, est.light, escapes, group, groups))
         candidates = []
-        for order in sorted({0, c.coat_order}):
-            reflected = CoatReflection(est.light, np.ones((groups, 3)), order)
-            rows = reflected.rows(normals, obs.view_dir, c.coat_ior, escapes)
+        for reflected, rows in shapes:
+            rows = reflected.rows(normals, obs.view_dir, c.coat_ior, escapes) if rows is None else rows
             weight = coat.fit_coat(obs.face, obs.rgb, rows, obs.num_faces, self.loss, group=group,
                                    num_groups=groups)
             weight = weight * coat.admissible_scale(obs.rgb, weight[group] * rows, c.coat_max_negative,
@@ -172,10 +186,11 @@ class RetinexSegmented(Method):
         regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
         fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions)
                   for _, reflection in candidates]
+        # a coat's unknowns: its groups' strengths and two of the grey colour; a lobe's exponent one more
         costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
-                                [0] + [len(np.unique(group)) + 2] * len(candidates))
+                                [0] + [len(np.unique(group)) + 2 + (r.exponent is not None) for r, _ in candidates])
         best = int(np.argmin(costs))
-        named = {"none": float(costs[0]), **{f"degree {r.order}": float(x) for (r, _), x in zip(candidates, costs[1:])}}
+        named = {"none": float(costs[0]), **{coat_name(r): float(x) for (r, _), x in zip(candidates, costs[1:])}}
         costs_text = ", ".join(f"{name} {cost:.1f}" for name, cost in named.items())
         self.log(f"coat's reflection: costs {costs_text}; {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
         applied = None
@@ -183,6 +198,19 @@ class RetinexSegmented(Method):
             (est, chosen), applied = fitted[best - 1], candidates[best - 1][0]
         est.info["coat_costs"] = named
         return est, chosen, applied
+
+    def _lobe_shape(self, obs, normals: np.ndarray, light: np.ndarray, escapes: np.ndarray, group: np.ndarray,
+                    groups: int) -> tuple[CoatReflection, np.ndarray]:
+        """The Phong lobe (:func:`coat.lobe_rows`) of the exponent among
+        :data:`coat.LOBE_EXPONENTS` whose rows, weighted as :func:`coat.fit_coat` fits them,
+        leave the least of the colours' changes across views unexplained
+        (:func:`coat.unexplained_cost`); with its rows (N, 3) per unit weight."""
+        rows = coat.lobe_rows(normals, obs.view_dir, light, coat.LOBE_EXPONENTS, escapes)
+        fitted = [coat.fit_coat(obs.face, obs.rgb, r, obs.num_faces, self.loss, group=group,
+                                num_groups=groups)[group] * r for r in rows]
+        best = int(np.argmin(coat.unexplained_cost(obs.face, obs.rgb, fitted, obs.num_faces)))
+        shape = CoatReflection(light, np.ones((groups, 3)), sh.order_of(light.shape[0]), coat.LOBE_EXPONENTS[best])
+        return shape, rows[best]
 
     def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None,
              labels: np.ndarray | None = None) -> tuple[Estimate, Hypothesis]:

@@ -147,11 +147,15 @@ class CoatReflection:
     weight : (G, 3) the coat's colour per coat group (:func:`.method.coat_groups`; one group
         unless ``coat_per_region``).
     order : the light's SH degree the reflection carries (0: the environment's mean level).
+    exponent : None for a dielectric coat; else the reflection is a Phong lobe's of this
+        exponent (:func:`estimator.light.coat.lobe_rows`: no Fresnel factor, the whole light
+        filtered by the lobe, where the mirror direction escapes the object).
     """
 
     light: np.ndarray
     weight: np.ndarray
     order: int
+    exponent: float | None = None
 
     def rows(self, normals: np.ndarray, view_dir: np.ndarray, ior: float, escapes: np.ndarray) -> np.ndarray:
         """(N, 3) the reflection per unit weight (:func:`estimator.light.coat.coat_rows`) of
@@ -162,6 +166,8 @@ class CoatReflection:
         surface only where the object blocks it. The low orders' rows stay without it (with it,
         three coated seeds of the random family's development set lost 0.2-1.1 dB and one
         gained 0.2)."""
+        if self.exponent is not None:
+            return coat.lobe_rows(normals, view_dir, self.light, [self.exponent], escapes)[0]
         return coat.coat_rows(normals, view_dir, self.light, self.order, ior, escapes if self.order == 0 else None)
 
 
