@@ -62,6 +62,7 @@ class Predictor:
         value = self.model.predict(est.diffuse[f], est.specular[f], (self.c_matrix @ light)[f],
                                    self.model.specular_shading(f, mirror, self.sampling, self.visibility, light))
         rgb = np.zeros((camera.height * camera.width, 3), dtype=np.float32)
-        rgb[hit] = value
+        with np.errstate(over="ignore"):   # beyond float32: Inf, which the caller judges (an absurd estimate)
+            rgb[hit] = value
         coverage = (face >= 0).astype(np.float32)
         return rgb.reshape(camera.height, camera.width, 3), coverage.reshape(camera.height, camera.width)

@@ -224,7 +224,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     cameras = [v.camera for v in views]
     pure_ids = caster.face_id_buffers(cameras, pure=True) if pure_pixels else [None] * len(views)
     centre_ids = caster.face_id_buffers(cameras)   # the caster's kept buffers: traced once
-    usable, rejected, levels = [], [], []
+    usable, rejected, levels, on_mesh = [], [], [], []
     for view, ids in zip(views, centre_ids):
         valid = ids.ravel() >= 0
         if view.alpha is not None:
@@ -235,6 +235,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         negative = valid & np.any(rgb < -negative_tolerance * max(level, 1e-30), axis=1)
         rejected.append(int(negative.sum()))
         usable.append(valid & ~negative)
+        on_mesh.append(bool(valid.any()))
     # the pure pixels' rows; where they resolve under half of the faces a pixel centre hits
     # (faces smaller than a pixel: a dense scan), the other faces' rows through their centres
     pure_rows = [None if p is None else _face_means(p.ravel(), valid, view.rgb.reshape(-1, 3), f, min_pixels)
@@ -272,6 +273,11 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         raise InputError(f"{len(clear)} view(s) are fully transparent (alpha below {min_alpha} everywhere): "
                          f"{', '.join(clear[:5])}{' ...' if len(clear) > 5 else ''}; check their alpha channel "
                          "or drop them from the dataset")
+    dark = [view.name for view, valid, seen in zip(views, usable, on_mesh) if seen and not valid.any()]
+    if dark:
+        raise InputError(f"{len(dark)} view(s) show the mesh but every pixel on it has a channel below zero: "
+                         f"{', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}; check their black level and "
+                         "sign (the images must be linear radiance) or drop them from the dataset")
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
     if len(blind) == len(views) and hit.any():
         raise InputError(f"no face covers min_pixels={min_pixels} pixels in any view, although pixel centres hit "

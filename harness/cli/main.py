@@ -495,9 +495,15 @@ def cmd_render(args) -> int:
         raise InputError(f"the dataset {ds.path} has no {args.frames} frames")
     rotation = None if rotation is None else axis_angle_matrix(*rotation)
     predictor = Predictor(ds.data.mesh, est)
+    limit = float(np.finfo(np.float32).max)   # what an EXR of float32 pixels holds
     with atomic_directory(args.output, overwrite=args.overwrite, inputs=inputs, kind="render") as tmp:
         for view in views:
             rgb, coverage = predictor.predict(view.camera, rotation)
+            largest = float(np.max(np.abs(rgb), initial=0.0)) if np.all(np.isfinite(rgb)) else np.inf
+            if largest > limit:   # the run's numbers, not the output file, are at fault
+                raise InputError(f"{args.run}: the estimate predicts pixels of magnitude {largest:.3g} in view "
+                                 f"{view.name}, beyond any image's range ({limit:.3g}): its light or albedos in "
+                                 "estimate.npz are absurd")
             name = os.path.splitext(os.path.basename(view.name))[0] + ".exr"
             write_exr(os.path.join(tmp, name), np.concatenate([rgb, coverage[..., None]], axis=2))
     print(f"{len(views)} predicted images written to {os.path.abspath(args.output)}")

@@ -47,6 +47,16 @@ def test_cameras_that_see_nothing_are_refused():
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 
+def test_a_view_whose_pixels_on_the_mesh_are_all_negative_is_named():
+    """A sign or black-level error, not a pose error: the message says so and names the view."""
+    good = View("good", CAM, np.full((12, 16, 3), 0.5))
+    flipped = View("flipped", CAM, np.full((12, 16, 3), -0.5))
+    data = MultiViewData(sphere(1), [good, flipped])
+    with pytest.raises(ValueError, match="1 view.s. show the mesh but every pixel on it has a channel below zero: "
+                                         "flipped"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+
+
 def test_a_mesh_wound_inwards_is_named():
     """Normals pointing inwards: every visible face is seen from behind, and the error says
     the winding is reversed rather than blaming the poses or min_cos_view."""

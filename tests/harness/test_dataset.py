@@ -29,6 +29,22 @@ def test_exr_round_trip(tmp_path):
         read_exr(tmp_path / "d.exr")
 
 
+def test_a_truncated_exr_is_one_error_and_the_library_prints_nothing(tmp_path, capfd):
+    """OpenEXR prints its own lines (to the process's stdout and stderr) on a corrupt file
+    before it raises: they are held, and the first of them joins the one error."""
+    write_exr(tmp_path / "a.exr", np.ones((64, 64, 3), np.float32))
+    data = (tmp_path / "a.exr").read_bytes()
+    (tmp_path / "t.exr").write_bytes(data[: int(len(data) * 0.9)])   # the header whole, the pixels cut
+    capfd.readouterr()
+    with pytest.raises(ValueError, match=r"cannot read EXR file .*t\.exr \(truncated or not an EXR\?\).*OpenEXR: "):
+        read_exr(tmp_path / "t.exr")
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
+    np.testing.assert_array_equal(read_exr(tmp_path / "a.exr"), 1.0)   # the streams are back: a good file reads
+    print("after")
+    assert capfd.readouterr().out == "after\n"
+
+
 def _toy(tmp_path):
     rng = np.random.default_rng(1)
     v = rng.normal(size=(30, 3))

@@ -479,6 +479,19 @@ def test_files_read_from_outside_the_dataset_are_inputs_too(copy, tmp_path, caps
                           run / "run.json"], "run.json", inputs=[run], absent=[tmp_path / "rep"])
 
 
+def test_rendering_a_run_whose_light_is_beyond_any_image_names_the_run(copy, tmp_path, capsys):
+    """A light so bright that its predicted pixels overflow an EXR's float32: the run's estimate
+    is named as the cause, not the output folder, and nothing is written."""
+    ds, run, _ = copy
+    data = dict(np.load(run / "estimate.npz"))
+    data["pseudo_sh"] = data["pseudo_sh"] * 1e300
+    np.savez(run / "estimate.npz", **data)
+    out = tmp_path / "predicted"
+    line = expect_error(capsys, ["render", run, "-o", out], str(run), "estimate.npz", "beyond any image's range",
+                        inputs=[run, ds], absent=[out])
+    assert str(out) not in line
+
+
 def test_malformed_estimate_and_regions_arrays(copy, capsys):
     ds, run, _ = copy
     out = run.parent / "rep2"
