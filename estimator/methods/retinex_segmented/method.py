@@ -157,8 +157,8 @@ class RetinexSegmented(Method):
         are, are one more hypothesis); the uncorrected and the corrected fits are judged by
         :func:`.decision.prediction_cost` on the colours as observed (each coat's reflection
         added back, one unknown per region's strength and two for the grey coat's shared
-        colour: three with one group; the lobe's exponent one more). Returns the estimate kept, its hypothesis and the
-        reflection subtracted before it (None: none)."""
+        colour: three with one group; the lobe's exponent one more). Returns the estimate kept,
+        its hypothesis and the reflection subtracted before it (None: none)."""
         c, obs = self.config, prep.obs
         normals = prep.data.mesh.face_normals[obs.face]
         escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
