@@ -148,8 +148,10 @@ def leaderboard(columns: list[tuple[str, str]], rows: list[dict]) -> str:
             + "</tbody></table></div>")
 
 
-def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regressions: list[dict] | None = None) -> str:
-    """One self-contained page: summary table, figures (section, caption, PNG bytes), raw metrics."""
+def report_page(metrics: dict, figures: list[tuple[str, str, bytes]] | None,
+                regressions: list[dict] | None = None) -> str:
+    """One self-contained page: summary table, figures (section, caption, PNG bytes; None:
+    the report was written without them, which the page says), raw metrics."""
     title = f"pseudolight report: {metrics.get('scene', '?')} / {metrics.get('method', '?')}"
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
              f"<style>{STYLE}</style></head><body><h1>{html.escape(title)}</h1>",
@@ -182,8 +184,10 @@ def report_page(metrics: dict, figures: list[tuple[str, str, bytes]], regression
         table = protocol_table((metrics.get(key) or {}).get("protocols") or {})
         if table:
             parts.append(f"<h2>{label}: published benchmarks' protocols</h2>{table}")
+    if figures is None:
+        parts.append("<p class='note'>Figures not drawn (the report was made with --no-figures).</p>")
     section = None
-    for sec, caption, png in figures:
+    for sec, caption, png in figures or []:
         if sec != section:
             parts.append(f"<h2>{html.escape(sec)}</h2>")
             section = sec

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -44,11 +46,16 @@ class Renders:
 
 @dataclass
 class ReportContent:
-    """What a report folder holds: metrics.json, ratios.npz and the figures."""
+    """What a report folder holds: metrics.json, ratios.npz and the figures.
+
+    figures : (section, caption, draw) each; ``draw()`` returns the figure's PNG bytes. Figures
+        are drawn only when the report is written with them (matplotlib takes most of a small
+        report's time, which a sweep of many runs may skip).
+    """
 
     metrics: dict
     ratios: dict
-    figures: list[tuple[str, str, bytes]] = field(default_factory=list)
+    figures: list[tuple[str, str, Callable[[], bytes]]] = field(default_factory=list)
 
 
 def view_names(views: list[View]) -> list[str]:
@@ -124,20 +131,23 @@ def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], render
             m[key]["unestimated_pixel_share"] = unestimated
 
     figs = [("Pseudo illumination", "estimated vs Phong-filtered ground truth (shared exposure)",
-             figures.illumination(est.pseudo_sh, ev.filtered_truth_sh)),
-            ("Albedo", "estimated / true albedo per face (the paper's Fig. 5e)", figures.ratio_histograms(ev.ratios))]
+             partial(figures.illumination, est.pseudo_sh, ev.filtered_truth_sh)),
+            ("Albedo", "estimated / true albedo per face (the paper's Fig. 5e)",
+             partial(figures.ratio_histograms, ev.ratios))]
     present = {c: getattr(est, c) for c in ("specular", "diffuse") if lookup(m, f"albedo.{c}.present")}
     if present:
         figs.append(("Albedo", "texture maps: lat-long projection from the mesh centre",
-                     figures.texture_maps(predictor.caster, present, {c: getattr(truth, c) for c in present})))
+                     partial(figures.texture_maps, predictor.caster, present,
+                             {c: getattr(truth, c) for c in present})))
     figs.append(("Clusters", "faces coloured by cluster (grey: seen, not estimated)",
-                 figures.clusters(predictor.caster, cams[:3], est.labels, truth.regions)))
+                 partial(figures.clusters, predictor.caster, cams[:3], est.labels, truth.regions)))
     for key, images, caption in (("Novel views", novel, "prediction (scaled per channel)"),
                                  ("Relighting", relit, "prediction, light rotated (scaled)"),
                                  ("Mitsuba cross-check", cross, "Mitsuba render of the estimate")):
         if images is not None and images.names:
-            figs.append((key, images.note or key, figures.image_comparison(
-                images.names[:3], images.predictions[:3], images.references[:3], images.masks[:3], caption)))
+            figs.append((key, images.note or key, partial(
+                figures.image_comparison, images.names[:3], images.predictions[:3], images.references[:3],
+                images.masks[:3], caption)))
     return ReportContent(m, ev.ratios, figs)
 
 

@@ -8,6 +8,9 @@ residual and gross-error bars, and the per-face relative standard error as a map
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+
 import numpy as np
 
 from estimator import Predictor
@@ -28,9 +31,26 @@ def _valid_views(views) -> list[dict]:
              "gross_share": _number_or_none(v.get("gross_share"))} for v in views]
 
 
+def _views_figure(predictor: Predictor, chosen: list) -> bytes:
+    """Image | prediction | residual of the training views ``chosen`` ((index, View) pairs),
+    on the pixels the estimate covers (and the alpha holds fully)."""
+    names, predictions, references, masks = [], [], [], []
+    for i, view in chosen:
+        predicted, coverage = predictor.predict(view.camera)
+        mask = coverage > 0
+        if view.alpha is not None:
+            mask &= view.alpha >= 0.999
+        names.append(f"view {i} ({view.name})")
+        predictions.append(predicted)
+        references.append(view.rgb)
+        masks.append(mask)
+    return figures.image_comparison(names, predictions, references, masks, "prediction")
+
+
 def self_check(predictor: Predictor, views: list, run: dict, est, max_views: int = 4
-               ) -> tuple[dict, list[tuple[str, str, bytes]]]:
-    """(metrics, figures) of the self-check.
+               ) -> tuple[dict, list[tuple[str, str, Callable[[], bytes]]]]:
+    """(metrics, figures) of the self-check; figures as (section, caption, draw), ``draw()``
+    returning the PNG bytes (:class:`reports.report.ReportContent`).
 
     Parameters
     ----------
@@ -48,32 +68,21 @@ def self_check(predictor: Predictor, views: list, run: dict, est, max_views: int
     figs = []
     if per_view:
         figs.append(("Self-check", "per training view: median relative residual and gross-error share",
-                     figures.view_bars([v["view"] for v in per_view], [v["residual"] for v in per_view],
-                                       [v.get("gross_share") for v in per_view])))
+                     partial(figures.view_bars, [v["view"] for v in per_view], [v["residual"] for v in per_view],
+                             [v.get("gross_share") for v in per_view])))
         order = np.argsort([-(v.get("gross_share") or 0.0) for v in per_view])[:max_views]
         chosen = [int(i) for i in order if int(i) < len(views)]
     else:
         chosen = list(range(min(max_views, len(views))))
-    names, predictions, references, masks = [], [], [], []
-    for i in chosen:
-        view = views[i]
-        predicted, coverage = predictor.predict(view.camera)
-        mask = coverage > 0
-        if view.alpha is not None:
-            mask &= view.alpha >= 0.999
-        names.append(f"view {i} ({view.name})")
-        predictions.append(predicted)
-        references.append(view.rgb)
-        masks.append(mask)
-    if names:
+    if chosen:
         figs.append(("Self-check", "training views with the most gross errors: image | prediction | residual",
-                     figures.image_comparison(names, predictions, references, masks, "prediction")))
+                     partial(_views_figure, predictor, [(i, views[i]) for i in chosen])))
     se = est.face_stats.get("albedo_se")
     if se is not None:
         level = np.linalg.norm(est.diffuse + est.specular, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             relative = np.linalg.norm(se, axis=1) / level
         figs.append(("Self-check", "per-face relative standard error of the albedo (grey: unseen or no inlier)",
-                     figures.face_values(predictor.caster, np.where(est.observed, relative, np.nan),
-                                         "relative standard error")))
+                     partial(figures.face_values, predictor.caster, np.where(est.observed, relative, np.nan),
+                             "relative standard error")))
     return metrics, figs

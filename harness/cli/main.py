@@ -223,7 +223,8 @@ def cmd_report(args) -> int:
     metrics, regressions = build_report(args.run, args.output, dataset, rotation, args.cross_check_spp,
                                         not args.no_mitsuba, baseline, args.overwrite, log=_err,
                                         check_fingerprint=not args.no_fingerprint_check,
-                                        protocols=tuple(dict.fromkeys(args.protocol or PROTOCOL_NAMES)))
+                                        protocols=tuple(dict.fromkeys(args.protocol or PROTOCOL_NAMES)),
+                                        figures=not args.no_figures)
     if args.write_baseline:
         from reports.regression import make_baseline
 
@@ -266,7 +267,8 @@ def cmd_suite(args) -> int:
                              "use --variant llvm_ad_rgb, or --executor dask with GPU workers")
     claim_sweep_folder(args.output)
     summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
-                        not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline)
+                        not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline,
+                        figures=not args.no_figures)
     for line in text_table(sweep_report.table_rows(summary["rows"]), sweep_report.TABLE_COLUMNS + SWEEP_METRICS):
         print(line)
     print(f"{summary['datasets']} datasets, {summary['runs']} runs: {summary['executed']} jobs run, "
@@ -283,7 +285,8 @@ def _dry_run(suite: dict, args) -> int:
     from harness.sweep.jobs import finished
     from harness.sweep.runner import plan
 
-    datasets, runs = plan(suite, args.output, not args.no_mitsuba, args.force, args.variant)
+    datasets, runs = plan(suite, args.output, not args.no_mitsuba, args.force, args.variant,
+                          figures=not args.no_figures)
     cached = {kind: [finished(j["folder"], j["id"]) for j in jobs] for kind, jobs in (("dataset", datasets),
                                                                                         ("run", runs))}
     print(f"suite {suite['name']}: {len(datasets)} datasets x {len(suite['methods'])} methods = {len(runs)} runs "
@@ -664,6 +667,8 @@ def _add_suite_parser(sub, name: str) -> None:
     su.add_argument("-o", "--output", required=True)
     su.add_argument("--profile", help="scene profile for every dataset (e.g. tiny, benchmark)")
     su.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba cross-check in the reports")
+    su.add_argument("--no-figures", action="store_true",
+                    help="reports without figures (the comparison and sweep plots are still drawn)")
     su.add_argument("--force", "--overwrite", action="store_true", dest="force",
                     help="redo every job (finished jobs are otherwise reused)")
     su.add_argument("--jobs", type=_int_at_least(1, MAX_JOBS), default=1,
@@ -754,6 +759,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="spp of the Mitsuba re-render (default 64; 512 for --specular-model lobe; at most "
                          f"{MAX_CROSS_CHECK_SPP}, the scene specs' bound)")
     rp.add_argument("--no-mitsuba", action="store_true", help="skip the Mitsuba re-render cross-check")
+    rp.add_argument("--no-figures", action="store_true",
+                    help="write the metrics and the page without drawing the figures (most of a small report's time)")
     rp.add_argument("--protocol", action="append", choices=PROTOCOL_NAMES,
                     help="a published benchmark's metric set for the novel views and relighting (repeatable; "
                          f"default: all of {', '.join(PROTOCOL_NAMES)}); see docs/reports.md")

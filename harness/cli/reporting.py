@@ -71,8 +71,12 @@ def _size(size: dict) -> str:
 def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rotation=("y", 90.0),
                  cross_check_spp: int | None = None, mitsuba: bool = True, baseline: dict | None = None,
                  overwrite: bool = False, log=print, check_fingerprint: bool = True,
-                 protocols: tuple[str, ...] = tuple(PROTOCOLS)) -> tuple[dict, list[dict] | None]:
+                 protocols: tuple[str, ...] = tuple(PROTOCOLS), figures: bool = True
+                 ) -> tuple[dict, list[dict] | None]:
     """Evaluate a run against its dataset's ground truth and write the report folder.
+
+    ``figures=False`` writes the metrics, ratios and page without the figures (matplotlib
+    takes most of a small report's time; a sweep of many runs may skip them).
 
     ``protocols``: the published benchmarks' metric sets to add to the novel-view and
     relighting figures (:mod:`reports.protocols`; all by default).
@@ -103,7 +107,7 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
             + (f" and scoring its {len(ds.data.test_views)} test frame(s)" if novel else " only (no test frames)"))
         m = {**header, "method": est.method, "ground_truth": None, "self_check": check_metrics,
              "novel_views": novel, "report_seconds": time.perf_counter() - t0}
-        _write_report(out_dir, overwrite, inputs, m, None, check_figures, None)
+        _write_report(out_dir, overwrite, inputs, m, None, check_figures if figures else None, None)
         return m, None
     views = ds.data.test_views or ds.data.views[:2]
     view_note = "" if ds.data.test_views else "the dataset has no test_frames: training views 0-1 used"
@@ -134,23 +138,25 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
         else:
             regressions = check(m, baseline)
     m["report_seconds"] = time.perf_counter() - t0
-    _write_report(out_dir, overwrite, inputs, m, content.ratios, content.figures + check_figures, regressions,
-                  lambda folder: export_scene(folder, mesh, est, cams[0]))
+    _write_report(out_dir, overwrite, inputs, m, content.ratios, content.figures + check_figures if figures else None,
+                  regressions, lambda folder: export_scene(folder, mesh, est, cams[0]))
     return m, regressions
 
 
 def _write_report(out_dir, overwrite, inputs, metrics, ratios, figs, regressions, export=None) -> None:
     """The report folder, atomically: metrics.json, ratios.npz (with ground truth), the
-    figures as PNG, report.html, and the estimate as a Mitsuba scene when ``export`` is given."""
+    figures as PNG (``figs``: (section, caption, draw) each; None: not drawn), report.html,
+    and the estimate as a Mitsuba scene when ``export`` is given."""
+    drawn = None if figs is None else [(section, caption, draw()) for section, caption, draw in figs]
     with atomic_directory(out_dir, overwrite=overwrite, inputs=inputs, kind="report") as tmp:
         dump_json(os.path.join(tmp, "metrics.json"), metrics)
         if ratios is not None:
             np.savez(os.path.join(tmp, "ratios.npz"), **ratios)
-        for index, (section, _, png) in enumerate(figs):
+        for index, (section, _, png) in enumerate(drawn or []):
             with open(os.path.join(tmp, f"fig{index:02d}_{section.lower().replace(' ', '_')}.png"), "wb") as f:
                 f.write(png)
         with open(os.path.join(tmp, "report.html"), "w") as f:
-            f.write(report_page(metrics, figs, regressions))
+            f.write(report_page(metrics, drawn, regressions))
         if export is not None:
             try:
                 export(os.path.join(tmp, "mitsuba"))

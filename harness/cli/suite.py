@@ -25,10 +25,11 @@ def ensure_dataset(scene: str, data_dir: str, profile: str | None = None, overwr
 
 
 def run_method(data_dir: str, method: str | None, run_dir: str, report_dir: str, mitsuba: bool = True,
-               baseline: dict | None = None, overrides: dict | None = None,
-               log=print) -> tuple[Estimate, dict, list[dict] | None]:
+               baseline: dict | None = None, overrides: dict | None = None, log=print,
+               figures: bool = True) -> tuple[Estimate, dict, list[dict] | None]:
     """Estimate a dataset with ``method`` (None: the dataset's recommendation), write the
-    run, and report it (against ``baseline`` when given). Returns (estimate, metrics, regressions)."""
+    run, and report it (against ``baseline`` when given; with its figures unless
+    ``figures=False``). Returns (estimate, metrics, regressions)."""
     ds = read_dataset(data_dir, load_test=False, load_truth=False)
     method, config = estimator_settings(ds.meta, method, overrides)
     known = {}
@@ -42,5 +43,5 @@ def run_method(data_dir: str, method: str | None, run_dir: str, report_dir: str,
               fingerprint=fingerprint(ds.data))
     log(f"estimated with {method} ({config.components}) in {est.info['timings']['total']:.1f} s")
     metrics, regressions = build_report(run_dir, report_dir, data_dir, mitsuba=mitsuba, baseline=baseline,
-                                        overwrite=True, log=log)
+                                        overwrite=True, log=log, figures=figures)
     return est, metrics, regressions

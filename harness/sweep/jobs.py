@@ -124,7 +124,7 @@ def dataset_job(job: dict) -> dict:
 
 def run_job(job: dict) -> dict:
     """Estimate and report one dataset with one method. ``job``: id, folder, dataset,
-    method, params, mitsuba, force, variant, threads. Returns its record with the report's
+    method, params, mitsuba, figures, force, variant, threads. Returns its record with the report's
     headline metrics (the comparison columns)."""
     done = _reusable(job)
     if done:
@@ -137,7 +137,8 @@ def run_job(job: dict) -> dict:
     os.makedirs(job["folder"], exist_ok=True)
     est, metrics, _ = run_method(job["dataset"], job["method"], os.path.join(job["folder"], "run"),
                                  os.path.join(job["folder"], "report"), job.get("mitsuba", False),
-                                 overrides=job["params"] or None, log=lambda m: None)
+                                 overrides=job["params"] or None, log=lambda m: None,
+                                 figures=job.get("figures", True))
     row = {key: lookup(metrics, key) for _, key in SWEEP_METRICS if key != "seconds"}
     return _record(job["folder"], {
         "id": job["id"], "kind": "run", "seconds": time.perf_counter() - t,

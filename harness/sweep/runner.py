@@ -27,8 +27,9 @@ def _slug(text: str) -> str:
 
 
 def plan(suite: dict, out_dir: str, mitsuba: bool = False, force: bool = False, variant: str | None = None,
-         threads: int | None = None) -> tuple[list[dict], list[dict]]:
-    """(dataset jobs, run jobs) of a suite as plain dicts with identities and folders."""
+         threads: int | None = None, figures: bool = True) -> tuple[list[dict], list[dict]]:
+    """(dataset jobs, run jobs) of a suite as plain dicts with identities and folders. A run's
+    identity holds what its report holds: the Mitsuba cross-check and the figures, or not."""
     datasets, runs = [], []
     for d in suite["datasets"]:
         did = identity(dataset_payload(d))
@@ -37,10 +38,11 @@ def plan(suite: dict, out_dir: str, mitsuba: bool = False, force: bool = False, 
                          "profile": d.profile, "overrides": d.overrides, "axes": d.axes, "seed": d.seed,
                          "force": force, "variant": variant, "threads": threads})
         for m in suite["methods"]:
-            rid = identity({"dataset": did, "method": m.method, "params": m.params, "mitsuba": mitsuba})
+            rid = identity({"dataset": did, "method": m.method, "params": m.params, "mitsuba": mitsuba,
+                            "figures": figures})
             runs.append({"id": rid, "folder": os.path.join(out_dir, "runs", f"{_slug(d.scene)}-{did}-{_slug(m.label)}"),
                          "dataset": folder, "scene": d.scene, "axes": d.axes, "seed": d.seed, "label": m.label,
-                         "method": m.method, "params": m.params, "mitsuba": mitsuba, "force": force,
+                         "method": m.method, "params": m.params, "mitsuba": mitsuba, "figures": figures, "force": force,
                          "variant": variant, "threads": threads})
     folders: dict[str, str] = {}
     for r in runs:
@@ -94,8 +96,9 @@ def claim_sweep_folder(out_dir: str) -> None:
 
 def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int = 1, scheduler: str | None = None,
               force: bool = False, mitsuba: bool = False, variant: str | None = None, log=print,
-              baseline_rows: list[dict] | None = None) -> dict:
-    """Run a loaded suite (:func:`harness.sweep.suite.load_suite`) into ``out_dir``.
+              baseline_rows: list[dict] | None = None, figures: bool = True) -> dict:
+    """Run a loaded suite (:func:`harness.sweep.suite.load_suite`) into ``out_dir``; the runs'
+    reports hold the Mitsuba cross-check when ``mitsuba`` and their figures when ``figures``.
 
     Returns a summary: job counts (run and reused), seconds, the rows of sweep.json, and
     with ``baseline_rows`` (a previous sweep's) the regression verdict
@@ -105,7 +108,7 @@ def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int =
     # the CUDA variant: one worker per GPU (Dr.Jit's CPU thread count does not apply)
     gpus = backend.cuda_device_count() if backend.resolve_variant(variant) == "cuda_ad_rgb" else 0
     threads = worker_threads(workers) if executor == "local" and workers > 1 and not gpus else None
-    datasets, runs = plan(suite, out_dir, mitsuba, force, variant, threads)
+    datasets, runs = plan(suite, out_dir, mitsuba, force, variant, threads, figures)
     done_d = _execute(dataset_job, datasets, "dataset", executor, workers, scheduler, log, gpus)
     done_r = _execute(run_job, runs, "run", executor, workers, scheduler, log, gpus)
     rows = [{"scene": r["scene"], "label": r["label"], "method": r["method"], "axes": r["axes"], "seed": r["seed"],

@@ -1,7 +1,10 @@
 """Benchmark sweeps: suite expansion, job identity, resume without repeated work, and the
-same sweep on a spawned pool and on a loopback Dask LocalCluster."""
+same sweep serially and on a loopback Dask LocalCluster."""
+import contextlib
+import io
 import json
 import os
+import shutil
 
 import pytest
 
@@ -38,6 +41,9 @@ sweep = { "cameras.count" = [6, 12], "faults.noise_read" = [0.0, 0.1] }
     assert len({r["id"] for r in runs}) == 16
     again, _ = plan(load_suite(path), str(tmp_path / "out"))
     assert [d["id"] for d in again] == [d["id"] for d in datasets]      # identity is deterministic
+    plain, bare = plan(suite, str(tmp_path / "out"), figures=False)     # a report without figures is another run
+    assert [d["id"] for d in plain] == [d["id"] for d in datasets]
+    assert not {r["id"] for r in bare} & {r["id"] for r in runs}
 
 
 @pytest.mark.parametrize("text, needle", [
@@ -120,14 +126,29 @@ def test_gpu_pool_pins_one_worker_per_device():
     assert all(len({r["device"] for r in results if r["pid"] == p}) == 1 for p in pids)
 
 
-def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
-    out = tmp_path / "smoke"
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--dry-run"]) == 0
-    dry = capsys.readouterr().out
-    assert "2 datasets x 2 methods = 4 runs" in dry and "runs: 0 cached, 4 to run" in dry and not out.exists()
-    assert main(["suite", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
-    first = capsys.readouterr().out
+SMOKE = ["bench", "smoke", "--no-mitsuba", "--no-figures"]   # the reports' figures are tested in tests/reports
+
+
+@pytest.fixture(scope="module")
+def smoke_sweep(tmp_path_factory):
+    """The smoke sweep run once, serially, for this module: (its folder, what it printed).
+    A test that changes the folder works on a copy."""
+    out = tmp_path_factory.mktemp("sweep") / "smoke"
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main([*SMOKE, "-o", str(out), "--dry-run"]) == 0
+        dry = printed.getvalue()
+        assert not out.exists()
+        assert main([*SMOKE, "-o", str(out)]) == 0
+    return out, dry, printed.getvalue()[len(dry):]
+
+
+def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(smoke_sweep, tmp_path, capsys):
+    made, dry, first = smoke_sweep
+    assert "2 datasets x 2 methods = 4 runs" in dry and "runs: 0 cached, 4 to run" in dry
     assert "2 datasets, 4 runs: 6 jobs run, 0 reused" in first
+    out = tmp_path / "smoke"
+    shutil.copytree(made, out)
     # the terminal table shows the sweep's own columns, each filled for these methods
     header, *lines = [line for line in first.splitlines() if line.startswith(("scene ", "sparse-colored "))]
     assert "diffuse PSNR, lstsq (dB)" in header and "sweep values" in header and len(lines) == 4
@@ -143,54 +164,54 @@ def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(tmp_path, capsys):
     expected = {("cameras.count=6", None), ("cameras.count=12", None)}   # smoke draws no seeds
     assert {(r["sweep_values"], r["seed"]) for r in compared} == expected
     assert "cameras.count=12" in (out / "compare" / "compare.html").read_text()
+    report = next((out / "runs").glob("*/report"))                        # --no-figures: metrics and page only
+    assert (report / "metrics.json").is_file() and not list(report.glob("*.png"))
+    assert "Figures not drawn" in (report / "report.html").read_text()
     # resumed: nothing is run again; the runs' files are untouched
     run_json = next((out / "runs").glob("*/run/run.json"))
     stamp = os.path.getmtime(run_json)
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
+    assert main([*SMOKE, "-o", str(out)]) == 0
     assert "0 jobs run, 6 reused" in capsys.readouterr().out and os.path.getmtime(run_json) == stamp
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--dry-run"]) == 0
+    assert main([*SMOKE, "-o", str(out), "--dry-run"]) == 0
     assert "runs: 4 cached, 0 to run" in capsys.readouterr().out
     # an interrupted sweep: one run lost its record; only that job runs again
     os.remove(run_json.parent.parent / jobs.JOB_FILE)
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
+    assert main([*SMOKE, "-o", str(out)]) == 0
     assert "1 jobs run, 5 reused" in capsys.readouterr().out
     # a damaged cached dataset (a truncated image) is made again, not reused for ever
     image = next((out / "datasets").glob("*/images/train_001.exr"))
     image.write_bytes(image.read_bytes()[:100])
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba"]) == 0
+    assert main([*SMOKE, "-o", str(out)]) == 0
     assert "1 jobs run, 5 reused" in capsys.readouterr().out and image.stat().st_size > 100
     # a regression verdict against a previous sweep: the same code passes; a baseline that
     # claims a better result than now (beyond the tolerance) fails, named per row and metric
     baseline = tmp_path / "baseline.json"
     baseline.write_text((out / "compare" / "sweep.json").read_text())
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--baseline", str(baseline)]) == 0
+    assert main([*SMOKE, "-o", str(out), "--baseline", str(baseline)]) == 0
     assert "baseline sweep: 28 of 28 tracked metrics within tolerance" in capsys.readouterr().out   # 4 rows x 7
     verdict = json.load(open(out / "compare" / "regression.json"))
     assert verdict["worse"] == 0 and verdict["compared"] >= 4
     better = json.loads(baseline.read_text())
     better["rows"][0]["albedo.diffuse.lstsq.luminance.within_10"] = 1.5
     baseline.write_text(json.dumps(better))
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--baseline", str(baseline)]) == 1
+    assert main([*SMOKE, "-o", str(out), "--baseline", str(baseline)]) == 1
     err = capsys.readouterr().err
     assert err.count("REGRESSION") == 1 and "albedo.diffuse.lstsq.luminance.within_10" in err
     assert "Regression against the baseline sweep" in (out / "compare" / "sweep.html").read_text()
     baseline.write_text("{}")
-    assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--baseline", str(baseline)]) == 2
+    assert main([*SMOKE, "-o", str(out), "--baseline", str(baseline)]) == 2
     assert "a sweep.json holds 'rows'" in capsys.readouterr().err
 
 
-def test_smoke_sweep_on_a_spawned_pool_and_on_dask(tmp_path, capsys):
+def test_smoke_sweep_on_dask_matches_the_serial_one(smoke_sweep, tmp_path, capsys):
+    # the spawned pool runs the same sweep in the README walkthrough (bench smoke --jobs 2)
     distributed = pytest.importorskip("dask.distributed")
-    pool = tmp_path / "pool"
-    assert main(["bench", "smoke", "-o", str(pool), "--no-mitsuba", "--jobs", "2"]) == 0
-    assert "6 jobs run" in capsys.readouterr().out
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         out = tmp_path / "dask"
-        assert main(["bench", "smoke", "-o", str(out), "--no-mitsuba", "--executor", "dask",
-                     "--scheduler", cluster.scheduler_address]) == 0
+        assert main([*SMOKE, "-o", str(out), "--executor", "dask", "--scheduler", cluster.scheduler_address]) == 0
     assert "6 jobs run" in capsys.readouterr().out
-    a = json.load(open(pool / "compare" / "sweep.json"))["rows"]
+    a = json.load(open(smoke_sweep[0] / "compare" / "sweep.json"))["rows"]
     b = json.load(open(out / "compare" / "sweep.json"))["rows"]
     key = "albedo.diffuse.lstsq.luminance.within_10"
     assert sorted((r["label"], r["axes"]["cameras.count"], r[key]) for r in a) == \

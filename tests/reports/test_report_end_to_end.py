@@ -54,8 +54,13 @@ def test_baseline_regression_exit_codes(tiny_report, capsys):
     assert main(["report", str(run), "-o", str(tiny_report / "again"), "--cross-check-spp", "16",
                  "--baseline", str(base)]) == 0
     # a metric the baseline tracks but the report lacks counts as a regression
-    assert main(["report", str(run), "-o", str(tiny_report / "skip"), "--no-mitsuba", "--baseline", str(base)]) == 1
+    skip = tiny_report / "skip"
+    assert main(["report", str(run), "-o", str(skip), "--no-mitsuba", "--no-figures", "--baseline", str(base)]) == 1
     assert "mitsuba_cross_check.relative_l2_noise_free" in capsys.readouterr().err
+    # --no-figures: the same metrics, no PNG, and a page that says so
+    full, bare = (json.load(open(folder / "metrics.json")) for folder in (tiny_report / "report", skip))
+    assert bare["albedo"] == full["albedo"] and bare["novel_views"]["psnr_srgb"] == full["novel_views"]["psnr_srgb"]
+    assert not list(skip.glob("*.png")) and "Figures not drawn" in (skip / "report.html").read_text()
     worse = json.load(open(base))
     worse["metrics"]["albedo.specular.dc.luminance.within_10"] = 1.5  # impossible to reach
     worse["metrics"].pop("mitsuba_cross_check.relative_l2_noise_free", None)
