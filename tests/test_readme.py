@@ -2,11 +2,12 @@
 
 Each line of the "Command line" block is run through the CLI's ``main`` in one folder,
 with ``out/`` under it. To keep the test small every scene is generated at its ``tiny``
-profile (a line that names a profile keeps it), mitsuba-ad's budget is 2 s, and the sweeps'
-reports are written without the Mitsuba cross-check and the figures (the report lines draw
-them); the Dask line needs a cluster and is left out. Every other line must exit 0, except the ones the
-README says may not: ``--strict`` exits 3 when the estimate warns. The report against a
-baseline made at full size says that it does not compare them (exit 0), not 'regression'.
+profile (a line that names a profile keeps it), mitsuba-ad's budget is 2 s, the sweeps'
+reports are written without the Mitsuba cross-check, and those of ``suite`` without figures
+(the report lines and ``bench smoke`` draw them); the Dask line needs a cluster and is left
+out. Every other line must exit 0, except the ones the README says may not: ``--strict``
+exits 3 when the estimate warns. The report against a baseline made at full size says that
+it does not compare them (exit 0), not 'regression'.
 """
 from __future__ import annotations
 
@@ -43,7 +44,9 @@ def tiny(argv: list[str], out: str) -> list[str] | None:
     if "--time-budget" in argv:
         argv[argv.index("--time-budget") + 1] = "2"
     if command in ("report", "suite", "bench") and "--dry-run" not in argv:
-        argv += ["--no-mitsuba", "--no-figures"] if command != "report" else ["--cross-check-spp", "4"]
+        argv += ["--cross-check-spp", "4"] if command == "report" else ["--no-mitsuba"]
+    if command == "suite":
+        argv += ["--no-figures"]
     return argv
 
 

@@ -105,9 +105,10 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
             novel = {**images.metrics(), "unestimated_pixel_share": unestimated}
         log(f"{ds.path} has no ground_truth/: writing the self-check report"
             + (f" and scoring its {len(ds.data.test_views)} test frame(s)" if novel else " only (no test frames)"))
+        drawn = _draw(check_figures) if figures else None
         m = {**header, "method": est.method, "ground_truth": None, "self_check": check_metrics,
              "novel_views": novel, "report_seconds": time.perf_counter() - t0}
-        _write_report(out_dir, overwrite, inputs, m, None, check_figures if figures else None, None)
+        _write_report(out_dir, overwrite, inputs, m, None, drawn, None)
         return m, None
     views = ds.data.test_views or ds.data.views[:2]
     view_note = "" if ds.data.test_views else "the dataset has no test_frames: training views 0-1 used"
@@ -137,17 +138,22 @@ def build_report(run_dir: str, out_dir: str, dataset_dir: str | None = None, rot
             m["baseline"] = {"compared": False, "made_at": made_at}
         else:
             regressions = check(m, baseline)
+    drawn = _draw(content.figures + check_figures) if figures else None
     m["report_seconds"] = time.perf_counter() - t0
-    _write_report(out_dir, overwrite, inputs, m, content.ratios, content.figures + check_figures if figures else None,
-                  regressions, lambda folder: export_scene(folder, mesh, est, cams[0]))
+    _write_report(out_dir, overwrite, inputs, m, content.ratios, drawn, regressions,
+                  lambda folder: export_scene(folder, mesh, est, cams[0]))
     return m, regressions
 
 
-def _write_report(out_dir, overwrite, inputs, metrics, ratios, figs, regressions, export=None) -> None:
+def _draw(figs) -> list[tuple[str, str, bytes]]:
+    """The figures (section, caption, draw) as (section, caption, PNG bytes)."""
+    return [(section, caption, draw()) for section, caption, draw in figs]
+
+
+def _write_report(out_dir, overwrite, inputs, metrics, ratios, drawn, regressions, export=None) -> None:
     """The report folder, atomically: metrics.json, ratios.npz (with ground truth), the
-    figures as PNG (``figs``: (section, caption, draw) each; None: not drawn), report.html,
-    and the estimate as a Mitsuba scene when ``export`` is given."""
-    drawn = None if figs is None else [(section, caption, draw()) for section, caption, draw in figs]
+    figures as PNG (``drawn``: (section, caption, PNG bytes) each; None: not drawn),
+    report.html, and the estimate as a Mitsuba scene when ``export`` is given."""
     with atomic_directory(out_dir, overwrite=overwrite, inputs=inputs, kind="report") as tmp:
         dump_json(os.path.join(tmp, "metrics.json"), metrics)
         if ratios is not None:

@@ -2,9 +2,11 @@
 a spawned worker or a Dask worker runs them from specs and paths (never Mitsuba objects).
 
 A job's identity is a hash of what determines its result: the resolved scene spec (a
-dataset), that dataset's identity plus the method and its parameters (a run), and the code
-version. A finished job leaves ``job.json`` holding its identity and result in its folder;
-a job whose folder holds the same identity is not run again.
+dataset), that dataset's identity plus the method, its parameters and whether the report
+holds the Mitsuba cross-check (a run), and the code version. A finished job leaves
+``job.json`` holding its identity and result in its folder; a job whose folder holds the same
+identity is not run again, except a run whose report was written without figures when the
+sweep asks for them (figures change no metric, so they are not part of the identity).
 """
 from __future__ import annotations
 
@@ -42,8 +44,9 @@ def identity(payload: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def finished(folder: str, job_id: str) -> dict | None:
-    """The recorded result when ``folder`` holds a finished job of this identity, else None."""
+def finished(folder: str, job_id: str, figures: bool = False) -> dict | None:
+    """The recorded result when ``folder`` holds a finished job of this identity (a run, with
+    its report's figures when ``figures``), else None."""
     path = os.path.join(folder, JOB_FILE)
     try:
         with open(path) as f:
@@ -55,6 +58,8 @@ def finished(folder: str, job_id: str) -> dict | None:
     if record.get("kind") == "run" and not (isinstance(record.get("metrics"), dict)
                                             and os.path.isfile(os.path.join(folder, "report", "metrics.json"))):
         return None   # a damaged record or a deleted report: run it again
+    if record.get("kind") == "run" and figures and not record.get("figures", True):
+        return None   # its report has no figures, and they are asked for now
     if record.get("kind") == "dataset" and (not os.path.isfile(os.path.join(folder, "transforms.json"))
                                             or record.get("files") != file_digests(folder)):
         return None   # a file changed, truncated or deleted since it was made: make it again
@@ -98,7 +103,7 @@ def _threads(job: dict) -> None:
 def _reusable(job: dict) -> dict | None:
     """The finished job's record (marked reused) unless ``force``; else None, after setting
     this worker's thread count for the work to come."""
-    done = None if job.get("force") else finished(job["folder"], job["id"])
+    done = None if job.get("force") else finished(job["folder"], job["id"], job.get("figures", False))
     if done:
         return {**done, "reused": True}
     _threads(job)
@@ -142,7 +147,7 @@ def run_job(job: dict) -> dict:
     row = {key: lookup(metrics, key) for _, key in SWEEP_METRICS if key != "seconds"}
     return _record(job["folder"], {
         "id": job["id"], "kind": "run", "seconds": time.perf_counter() - t,
-        "estimate_seconds": float(est.info["timings"]["total"]),
+        "estimate_seconds": float(est.info["timings"]["total"]), "figures": job.get("figures", True),
         "worker_peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "metrics": {k: (None if v is None else float(v)) for k, v in row.items()},
         "warnings": est.info.get("warnings", []), "reused": False})

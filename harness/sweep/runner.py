@@ -29,7 +29,8 @@ def _slug(text: str) -> str:
 def plan(suite: dict, out_dir: str, mitsuba: bool = False, force: bool = False, variant: str | None = None,
          threads: int | None = None, figures: bool = True) -> tuple[list[dict], list[dict]]:
     """(dataset jobs, run jobs) of a suite as plain dicts with identities and folders. A run's
-    identity holds what its report holds: the Mitsuba cross-check and the figures, or not."""
+    identity holds whether its report holds the Mitsuba cross-check; ``figures`` is carried
+    beside it (figures change no metric: a run reported with them serves a sweep without)."""
     datasets, runs = [], []
     for d in suite["datasets"]:
         did = identity(dataset_payload(d))
@@ -38,8 +39,7 @@ def plan(suite: dict, out_dir: str, mitsuba: bool = False, force: bool = False, 
                          "profile": d.profile, "overrides": d.overrides, "axes": d.axes, "seed": d.seed,
                          "force": force, "variant": variant, "threads": threads})
         for m in suite["methods"]:
-            rid = identity({"dataset": did, "method": m.method, "params": m.params, "mitsuba": mitsuba,
-                            "figures": figures})
+            rid = identity({"dataset": did, "method": m.method, "params": m.params, "mitsuba": mitsuba})
             runs.append({"id": rid, "folder": os.path.join(out_dir, "runs", f"{_slug(d.scene)}-{did}-{_slug(m.label)}"),
                          "dataset": folder, "scene": d.scene, "axes": d.axes, "seed": d.seed, "label": m.label,
                          "method": m.method, "params": m.params, "mitsuba": mitsuba, "figures": figures, "force": force,

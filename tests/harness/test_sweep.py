@@ -1,5 +1,5 @@
 """Benchmark sweeps: suite expansion, job identity, resume without repeated work, and the
-same sweep serially and on a loopback Dask LocalCluster."""
+same sweep serially, on a spawned pool and on a loopback Dask LocalCluster."""
 import contextlib
 import io
 import json
@@ -41,9 +41,17 @@ sweep = { "cameras.count" = [6, 12], "faults.noise_read" = [0.0, 0.1] }
     assert len({r["id"] for r in runs}) == 16
     again, _ = plan(load_suite(path), str(tmp_path / "out"))
     assert [d["id"] for d in again] == [d["id"] for d in datasets]      # identity is deterministic
-    plain, bare = plan(suite, str(tmp_path / "out"), figures=False)     # a report without figures is another run
-    assert [d["id"] for d in plain] == [d["id"] for d in datasets]
-    assert not {r["id"] for r in bare} & {r["id"] for r in runs}
+    _, bare = plan(suite, str(tmp_path / "out"), figures=False)         # figures change no metric: same runs
+    assert [r["id"] for r in bare] == [r["id"] for r in runs] and not any(r["figures"] for r in bare)
+
+
+def test_a_run_reported_without_figures_is_not_reused_when_figures_are_asked(tmp_path):
+    (tmp_path / "report").mkdir()
+    (tmp_path / "report" / "metrics.json").write_text("{}")
+    for figures in (False, True):
+        (tmp_path / jobs.JOB_FILE).write_text(json.dumps({"id": "x", "kind": "run", "metrics": {}, "figures": figures}))
+        assert jobs.finished(str(tmp_path), "x", figures=False) is not None     # either serves a sweep without
+        assert (jobs.finished(str(tmp_path), "x", figures=True) is not None) == figures
 
 
 @pytest.mark.parametrize("text, needle", [
@@ -203,19 +211,21 @@ def test_smoke_sweep_runs_then_resumes_with_no_repeated_work(smoke_sweep, tmp_pa
     assert "a sweep.json holds 'rows'" in capsys.readouterr().err
 
 
-def test_smoke_sweep_on_dask_matches_the_serial_one(smoke_sweep, tmp_path, capsys):
-    # the spawned pool runs the same sweep in the README walkthrough (bench smoke --jobs 2)
+def test_smoke_sweep_on_a_spawned_pool_and_on_dask_matches_the_serial_one(smoke_sweep, tmp_path, capsys):
     distributed = pytest.importorskip("dask.distributed")
+    pool = tmp_path / "pool"
+    assert main([*SMOKE, "-o", str(pool), "--jobs", "2"]) == 0
+    assert "6 jobs run" in capsys.readouterr().out
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         out = tmp_path / "dask"
         assert main([*SMOKE, "-o", str(out), "--executor", "dask", "--scheduler", cluster.scheduler_address]) == 0
     assert "6 jobs run" in capsys.readouterr().out
-    a = json.load(open(smoke_sweep[0] / "compare" / "sweep.json"))["rows"]
-    b = json.load(open(out / "compare" / "sweep.json"))["rows"]
     key = "albedo.diffuse.lstsq.luminance.within_10"
-    assert sorted((r["label"], r["axes"]["cameras.count"], r[key]) for r in a) == \
-        sorted((r["label"], r["axes"]["cameras.count"], r[key]) for r in b)
+    serial, *others = (sorted((r["label"], r["axes"]["cameras.count"], r[key])
+                              for r in json.load(open(folder / "compare" / "sweep.json"))["rows"])
+                       for folder in (smoke_sweep[0], pool, out))
+    assert all(rows == serial for rows in others)
 
 
 @pytest.mark.parametrize("text, needle", [
