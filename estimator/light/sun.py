@@ -179,23 +179,21 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
     base = edge_fit.edge_residuals(radiance, low @ base_light, edges, usable)
     scale = edge_fit.edge_scale(base)
 
-    def fit_cost(column, initial=None):
-        """(edge cost, fitted light) of the sky beside one candidate sun ``column`` (F,); the
-        fit starts from ``initial`` (M + 1, 3), a neighbouring candidate's light, when given."""
+    def cost(d, ior):
+        return cost_of_column(sun_shading(mesh, caster, d, ior))
+
+    def cost_of_column(column):
         columns = np.hstack([low, column[:, None]])
-        light, _ = edge_fit.log_shading_fit(radiance, columns, edges, usable, initial=initial, **fit)
+        light, _ = edge_fit.log_shading_fit(radiance, columns, edges, usable, **fit)
         if np.any(light[-1 - fixed.shape[1]:] <= 0):   # a sun takes light away nowhere: a dark albedo patch is no sun
-            return np.inf, light
-        return edge_fit.edge_cost(edge_fit.edge_residuals(radiance, columns @ light, edges, usable), scale), light
+            return np.inf
+        return edge_fit.edge_cost(edge_fit.edge_residuals(radiance, columns @ light, edges, usable), scale)
 
     base_cost = edge_fit.edge_cost(base, scale)
 
-    def descend(d, best, light, ior, steps):
-        """Pattern search from ``d`` (cost ``best``, fitted light ``light``): move to the best
-        of six neighbours on a ring while it lowers the cost, then shrink the ring. Each
-        neighbour's fit starts from the centre's light: a sun a few degrees away shades the
-        faces nearly alike, so its Gauss-Newton fit starts near its optimum and stops after
-        fewer steps. Returns (direction, cost, light, evaluations)."""
+    def descend(d, best, ior, steps):
+        """Pattern search from ``d``: move to the best of six neighbours on a ring while it
+        lowers the cost, then shrink the ring. Returns (direction, cost, evaluations)."""
         evaluations = 0
         for step in np.radians(steps):
             moved, moves = True, 0
@@ -205,25 +203,23 @@ def find_sun(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarray, usab
                 ring = [np.cos(step) * d + np.sin(step) * (np.cos(a) * u + np.sin(a) * v)
                         for a in np.arange(6) * np.pi / 3]
                 shadings = sun_shadings(mesh, caster, np.array(ring), ior)
-                trials = [fit_cost(shadings[:, k], light) for k in range(len(ring))]
+                costs = [cost_of_column(shadings[:, k]) for k in range(len(ring))]
                 evaluations += len(ring)
-                k = int(np.argmin([c for c, _ in trials]))
-                moved = trials[k][0] < best
+                k = int(np.argmin(costs))
+                moved = costs[k] < best
                 if moved:
-                    (best, light), d = trials[k], ring[k] / np.linalg.norm(ring[k])
-        return d, best, light, evaluations
+                    best, d = costs[k], ring[k] / np.linalg.norm(ring[k])
+        return d, best, evaluations
 
     d = np.asarray(start, float) / np.linalg.norm(start)
-    d, best, light, evaluations = descend(d, *fit_cost(sun_shading(mesh, caster, d, None)), None, steps_deg)
+    d, best, evaluations = descend(d, cost(d, None), None, steps_deg)
     ior, evaluations = None, evaluations + 1
     if coat_ior is not None:   # the bare sun places the shadows; then the coat's column, refined at the finest step
-        coated, coated_light = fit_cost(sun_shading(mesh, caster, d, coat_ior), light)
+        coated = cost(d, coat_ior)
         evaluations += 1
         if coated < best:
-            d, best, light, more = descend(d, coated, coated_light, coat_ior, steps_deg[-1:])
+            d, best, more = descend(d, coated, coat_ior, steps_deg[-1:])
             ior, evaluations = coat_ior, evaluations + more
-    # the chosen sun's cost from the same cold start as the sunless fit's, which it is weighed against
-    best, evaluations = fit_cost(sun_shading(mesh, caster, d, ior))[0], evaluations + 1
     residuals = int(np.isfinite(base).all(axis=1).sum()) * base.shape[1]
     return Sun(d, best / max(base_cost, 1e-300), evaluations, ior, gain=base_cost - best,
                penalty=0.5 * SUN_PARAMETERS * np.log(max(residuals, 2)))

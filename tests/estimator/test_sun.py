@@ -7,7 +7,7 @@ from estimator.config import EstimatorConfig
 from estimator.core import sh
 from estimator.core.data import TriangleMesh
 from estimator.core.errors import InputError
-from estimator.light.edge_fit import edge_cost, edge_residuals, edge_scale, log_shading_fit
+from estimator.light.edge_fit import log_shading_fit
 from estimator.light.sun import brightest_direction, find_sun, find_suns, sun_shading, sun_shadings
 from estimator.model.reflection import diffuse_matrix, fresnel_dielectric
 from estimator.model.reflection_models import reflection_model
@@ -231,24 +231,3 @@ def test_find_suns_finds_a_second_lamp_of_another_colour(scene):
     assert one.directions.shape == (1, 3)
     np.testing.assert_allclose(one.direction, find_sun(*args).direction)
 
-
-
-def test_a_fit_started_from_a_neighbouring_sun_s_light_lands_where_a_cold_fit_does(scene):
-    """The search starts each ring candidate's edge fit (5 Gauss-Newton steps at most, as the
-    search runs it) from the ring centre's light: for a sun 3 degrees away, that fit ends where
-    the fit from the DC alone does, its edge cost within 0.1 % and every face's log shading
-    within 1 %. Warm starts change the search's cost, not its landscape."""
-    mesh, caster, c_matrix, albedo, sky = scene
-    to_sun, e_sun = _unit([0.5, 0.7, 0.3]), np.array([3.0, 2.5, 1.5])
-    radiance = albedo * (c_matrix @ sky + sun_shading(mesh, caster, to_sun)[:, None] * e_sun)
-    edges, usable = mesh.face_adjacency, np.ones(mesh.num_faces, dtype=bool)
-    near = _unit(to_sun + np.tan(np.radians(3.0)) * _unit(np.cross(to_sun, [0.0, 1.0, 0.0])))
-    centre_columns, columns = (np.hstack([c_matrix, sun_shading(mesh, caster, d)[:, None]]) for d in (to_sun, near))
-    centre, _ = log_shading_fit(radiance, centre_columns, edges, usable, iterations=5)
-    cold, _ = log_shading_fit(radiance, columns, edges, usable, iterations=5)
-    warm, _ = log_shading_fit(radiance, columns, edges, usable, initial=centre, iterations=5)
-    np.testing.assert_allclose(np.log(columns @ warm), np.log(columns @ cold), atol=0.01)
-    scale = edge_scale(edge_residuals(radiance, c_matrix @ log_shading_fit(radiance, c_matrix, edges, usable)[0],
-                                      edges, usable))
-    costs = [edge_cost(edge_residuals(radiance, columns @ light, edges, usable), scale) for light in (cold, warm)]
-    assert abs(costs[1] - costs[0]) <= 1e-3 * costs[0]
