@@ -287,7 +287,7 @@ def _dry_run(suite: dict, args) -> int:
 
     datasets, runs = plan(suite, args.output, not args.no_mitsuba, args.force, args.variant,
                           figures=not args.no_figures)
-    cached = {kind: [finished(j["folder"], j["id"], j.get("figures", False)) for j in jobs]
+    cached = {kind: [finished(j["folder"], j["id"], j.get("figures", True)) for j in jobs]
               for kind, jobs in (("dataset", datasets), ("run", runs))}
     print(f"suite {suite['name']}: {len(datasets)} datasets x {len(suite['methods'])} methods = {len(runs)} runs "
           f"(scenes: {', '.join(sorted({d['scene'] for d in datasets}))})")

@@ -103,7 +103,7 @@ def _threads(job: dict) -> None:
 def _reusable(job: dict) -> dict | None:
     """The finished job's record (marked reused) unless ``force``; else None, after setting
     this worker's thread count for the work to come."""
-    done = None if job.get("force") else finished(job["folder"], job["id"], job.get("figures", False))
+    done = None if job.get("force") else finished(job["folder"], job["id"], job.get("figures", True))
     if done:
         return {**done, "reused": True}
     _threads(job)
