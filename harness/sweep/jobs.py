@@ -44,7 +44,7 @@ def identity(payload: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def finished(folder: str, job_id: str, figures: bool = False) -> dict | None:
+def finished(folder: str, job_id: str, figures: bool = True) -> dict | None:
     """The recorded result when ``folder`` holds a finished job of this identity (a run, with
     its report's figures when ``figures``), else None."""
     path = os.path.join(folder, JOB_FILE)
