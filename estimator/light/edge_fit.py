@@ -103,8 +103,8 @@ def usable_edges(edges: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def edge_residuals(radiance: np.ndarray, shading: np.ndarray, edges: np.ndarray, usable: np.ndarray) -> np.ndarray:
-    """(E', 3) log radiance ratio minus log shading ratio across the :func:`usable_edges`;
-    radiance and shading (F, 3), positive where usable."""
+    """(E', C) log radiance ratio minus log shading ratio across the :func:`usable_edges`;
+    radiance and shading (F, C), positive where usable."""
     i, j = usable_edges(edges, usable)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.log(radiance[i] / radiance[j]) - np.log(
@@ -123,17 +123,18 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
 
     Parameters
     ----------
-    radiance : (F, 3) diffuse radiance of each face (linear, > 0 where ``usable``).
+    radiance : (F, C) diffuse radiance of each face (linear, > 0 where ``usable``), C colour
+        channels fitted apart (3; or 1, a grey radiance, where only the light's shape matters).
     c_matrix : (F, M) diffuse rows: the shading of face f under light L is c_matrix[f] @ L.
     edges : (E, 2) pairs of neighbouring faces.
     usable : (F,) bool, faces whose radiance enters the fit.
     labels : (F,) int uniform region of each face, -1 outside every region (None: edges only).
-    initial : (M, 3) starting light (None: DC only).
+    initial : (M, C) starting light (None: DC only).
     loss : robust loss of :func:`estimator.solvers.robust.irls_weights` ('none' is least squares).
     ridge : weight of the (l (l + 1))^2 penalty on the light's coefficients, per row.
     iterations : Gauss-Newton steps per channel at most (stops earlier when a step moves no
         shading by more than :data:`SHADING_TOLERANCE`).
-    indirect : (F, 3) shading added to C L (light the object reflects onto itself,
+    indirect : (F, C) shading added to C L (light the object reflects onto itself,
         :mod:`estimator.light.indirect`); it fixes the light's scale, so the DC is fitted too
         and the ridge weighs the coefficients over the DC (the shape, as without it).
     max_edges : beyond this many usable edges the fit runs on this many drawn at random
@@ -142,13 +143,13 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
 
     Returns
     -------
-    light : (M, 3) light with unit DC per channel (the scale is a gauge), or at its own
+    light : (M, C) light with unit DC per channel (the scale is a gauge), or at its own
         scale with ``indirect``.
-    region_albedo : (R, 3) albedo of each region (R = labels.max() + 1; (0, 3) without labels).
+    region_albedo : (R, C) albedo of each region (R = labels.max() + 1; (0, C) without labels).
     """
     f, m = c_matrix.shape
-    if radiance.shape != (f, 3) or usable.shape != (f,):
-        raise InputError(f"radiance must be (F, 3) and usable (F,) with F = {f} faces of c_matrix, "
+    if radiance.ndim != 2 or radiance.shape[0] != f or radiance.shape[1] < 1 or usable.shape != (f,):
+        raise InputError(f"radiance must be (F, C) and usable (F,) with F = {f} faces of c_matrix, "
                          f"got {radiance.shape} and {usable.shape}")
     if edges.ndim != 2 or edges.shape[1] != 2 or (len(edges) and (edges.min() < 0 or edges.max() >= f)):
         raise InputError(f"edges must be (E, 2) face indices below {f}, got shape {edges.shape}")
@@ -164,7 +165,8 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     regions = int(labels.max()) + 1 if len(member) else 0
     if len(i) + len(member) == 0:
         raise InputError("the light fit needs two usable neighbouring faces or a uniform region")
-    light = np.zeros((m, 3)) if initial is None else np.array(initial[:m], dtype=float)
+    channels = radiance.shape[1]
+    light = np.zeros((m, channels)) if initial is None else np.array(initial[:m], dtype=float)
     if initial is None:
         light[0] = 1.0
     if indirect is None:
@@ -182,13 +184,13 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
         i, j = compact[i[drawn]], compact[j[drawn]]
         group, member = group[touched[member]], compact[member[touched[member]]]
     penalty = ridge * (len(i) + len(member)) * (_degrees(m)[1:] * (_degrees(m)[1:] + 1)) ** 2
-    albedo = np.zeros((regions, 3))
+    albedo = np.zeros((regions, channels))
     graph = EdgeGraph(i, j, len(faces))
     rows = c_matrix if len(faces) == f else c_matrix[faces]
     # the unknowns' columns (the DC is the gauge without ``indirect``), copied once for the
     # three channels' Gauss-Newton products
     columns = np.ascontiguousarray(rows[:, (1 if indirect is None else 0):])
-    for c in range(3):
+    for c in range(channels):
         light[:, c], albedo[:, c] = _fit_channel(log_radiance[faces, c], rows, columns, graph, member, group,
                                                  regions, light[:, c], usable[faces], loss, penalty, iterations,
                                                  None if indirect is None else indirect[faces, c])
@@ -308,7 +310,7 @@ def _normal_equations(columns, inverse_shade, graph, member, group, regions, wei
 
 
 def edge_scale(residuals: np.ndarray) -> np.ndarray:
-    """(3,) robust scale per channel of edge residuals (E, 3) (:func:`edge_residuals`)."""
+    """(C,) robust scale per channel of edge residuals (E, C) (:func:`edge_residuals`)."""
     return np.array([robust.robust_scale(np.abs(residuals[:, c])) for c in range(residuals.shape[1])])
 
 

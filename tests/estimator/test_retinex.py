@@ -41,6 +41,20 @@ def test_recovers_the_shading_up_to_scale(with_regions):
         assert region_albedo.shape == (0, 3)
 
 
+@pytest.mark.parametrize("channel", [0, 2])
+def test_one_channel_alone_is_fitted_as_within_three(channel):
+    """A (F, 1) radiance (one channel, as a reflection's light is scaled per channel) gives that
+    channel's light and region albedos as the channel does beside the others: the channels are
+    fitted apart."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    usable = np.ones(len(radiance), dtype=bool)
+    alone, alone_albedo = log_shading_fit(radiance[:, [channel]], c_matrix, edges, usable, labels)
+    beside, beside_albedo = log_shading_fit(radiance, c_matrix, edges, usable, labels)
+    assert alone.shape == (4, 1) and alone_albedo.shape == (2, 1)
+    np.testing.assert_allclose(alone[:, 0], beside[:, channel], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(alone_albedo[:, 0], beside_albedo[:, channel], rtol=1e-9)
+
+
 @pytest.mark.parametrize("max_edges", [40, 300])
 def test_a_random_subset_of_the_edges_recovers_the_light_and_every_regions_albedo(max_edges):
     """Beyond ``max_edges`` the fit draws that many edges (of 1,104) and their faces' region
@@ -77,7 +91,8 @@ def test_unusable_faces_are_ignored():
 
 
 @pytest.mark.parametrize("change, match", [
-    (lambda a: {**a, "radiance": a["radiance"][:, :2]}, "radiance must be"),
+    (lambda a: {**a, "radiance": a["radiance"][:, :0]}, "radiance must be"),
+    (lambda a: {**a, "radiance": a["radiance"][:, :, None]}, "radiance must be"),
     (lambda a: {**a, "usable": a["usable"][:-1]}, "radiance must be"),
     (lambda a: {**a, "edges": a["edges"] + len(a["usable"])}, "edges must be"),
     (lambda a: {**a, "labels": np.zeros(3, dtype=int)}, "labels must be"),

@@ -99,7 +99,7 @@ def map_light(ctx: FitContext, fitted: coat_map.ReflectedLight, radiance: np.nda
     with_sun = np.zeros(3)
     for k in range(3):   # one unknown per channel: the sun's irradiance over the sky's
         pair = np.stack([sky_shading[:, k], sun_column], axis=1)
-        with_sun[k] = edge_fit.log_shading_fit(radiance[:, [k, k, k]], pair, ctx.edges, ctx.usable,
+        with_sun[k] = edge_fit.log_shading_fit(radiance[:, [k]], pair, ctx.edges, ctx.usable,
                                                **ctx.plain_fit)[0][1, 0]
     both = sky_shading + with_sun * sun_column[:, None]
     ratio = edge_fit.edge_cost_ratio(edge_fit.edge_residuals(radiance, sky_shading, ctx.edges, ctx.usable),

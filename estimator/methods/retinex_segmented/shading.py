@@ -56,6 +56,6 @@ def at_indirect_scale(ctx: FitContext, shading: Shading, radiance: np.ndarray, l
     for k in range(3):   # faces whose radiance and direct shading are positive in this channel
         usable = ctx.usable & np.isfinite(radiance[:, k]) & (radiance[:, k] > 0) & (shade[:, k] > 0)
         if usable.sum() >= 2:
-            scale[k] = edge_fit.log_shading_fit(radiance[:, [k, k, k]], shade[:, [k]], ctx.edges, usable,
-                                                **ctx.plain_fit, indirect=ctx.extra[:, [k, k, k]])[0][0, 0]
+            scale[k] = edge_fit.log_shading_fit(radiance[:, [k]], shade[:, [k]], ctx.edges, usable,
+                                                **ctx.plain_fit, indirect=ctx.extra[:, [k]])[0][0, 0]
     return light * scale
