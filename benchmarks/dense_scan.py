@@ -35,22 +35,19 @@ from scoring import setting  # noqa: E402
 ESTIMATE = r"""
 import json, resource, sys
 sys.path.insert(0, {root!r}); sys.path.insert(0, {root!r} + "/benchmarks")
-from scoring import score
+from scoring import score, seen_faces
 from estimator import estimate
 from harness.io.dataset import read_dataset, read_ground_truth
 from harness.io.runs import estimator_settings
 ds = read_dataset({folder!r}, load_test=False, load_truth=False)
 truth = read_ground_truth({folder!r}, ds.data.mesh.num_faces)
 method, config = estimator_settings(ds.meta, None, {overrides!r})
-import numpy as np
 from estimator.rays.raycast import RayCaster
-caster = RayCaster(ds.data.mesh)
+caster = RayCaster(ds.data.mesh, config.variant)
 est = estimate(ds.data, method, config, caster=caster)
-seen = np.zeros(ds.data.mesh.num_faces, dtype=bool)   # faces some pixel centre hits: the estimate's kept buffers
-for ids in caster.face_id_buffers([v.camera for v in ds.data.views]):
-    seen[ids[ids >= 0]] = True
-print(json.dumps({{"faces": ds.data.mesh.num_faces, "method": method, **score(ds, truth, est),
-                  "seen_faces": int(seen.sum()), "estimated_of_seen": float(est.observed[seen].mean()),
+seen = seen_faces(caster, ds.data.views)
+print(json.dumps({{"faces": ds.data.mesh.num_faces, "method": method, **score(ds, truth, est, seen=seen),
+                  "seen_faces": int(seen.sum()),
                   "unresolved_faces": est.info["unresolved_faces"], "timings": est.info["timings"],
                   "light_from": est.info.get("light_from"),
                   "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}}))

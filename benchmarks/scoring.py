@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+import numpy as np
+
 from harness.cli.heap import keep_freed_memory
 from reports import metrics
 from reports.ground_truth import evaluation_mask, true_irradiance
@@ -13,9 +15,21 @@ from reports.ground_truth import evaluation_mask, true_irradiance
 keep_freed_memory()
 
 
-def score(ds, truth, est, component: str = "diffuse") -> dict:
+def seen_faces(caster, views) -> np.ndarray:
+    """(F,) bool: the faces some pixel centre of ``views`` hits, from the face-ID buffers of
+    ``caster`` (the estimate's own, when it was passed to :func:`estimator.estimate`: traced
+    once, read here)."""
+    seen = np.zeros(caster.mesh.num_faces, dtype=bool)
+    for ids in caster.face_id_buffers([v.camera for v in views]):
+        seen[ids[ids >= 0]] = True
+    return seen
+
+
+def score(ds, truth, est, component: str = "diffuse", seen: np.ndarray | None = None) -> dict:
     """PSNR and share within ±10 % (least-squares gauge) of one albedo component, ARI, the
-    evaluated faces and the share of faces the estimate holds."""
+    evaluated faces and the share of faces the estimate holds; with ``seen`` (F,) bool
+    (:func:`seen_faces`) also the share of those faces it holds (``estimated_of_seen``): a face a
+    camera shows but the estimate leaves out is a hole in its texture."""
     irr = true_irradiance(ds.data.mesh, truth)
     mask = evaluation_mask(truth, irr, est.observed, component)
     estimated, true = getattr(est, component), getattr(truth, component)
@@ -26,7 +40,8 @@ def score(ds, truth, est, component: str = "diffuse") -> dict:
     )
     return {"psnr": metrics.albedo_psnr(estimated, true, mask),
             "within_10": metrics.ratio_summary(lstsq[:, 3])["within_10"], "ari": ari,
-            "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}
+            "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean()),
+            **({} if seen is None else {"estimated_of_seen": float(est.observed[seen].mean()) if seen.any() else 0.0})}
 
 
 def setting(text: str) -> tuple[str, object]:
