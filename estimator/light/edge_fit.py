@@ -123,8 +123,8 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
 
     Parameters
     ----------
-    radiance : (F, C) diffuse radiance of each face (linear, > 0 where ``usable``), C colour
-        channels fitted apart (3; or 1, a grey radiance, where only the light's shape matters).
+    radiance : (F, C) diffuse radiance of each face (linear, > 0 where ``usable``): C colour
+        channels, each fitted apart (3, or one channel alone).
     c_matrix : (F, M) diffuse rows: the shading of face f under light L is c_matrix[f] @ L.
     edges : (E, 2) pairs of neighbouring faces.
     usable : (F,) bool, faces whose radiance enters the fit.
@@ -166,6 +166,8 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     if len(i) + len(member) == 0:
         raise InputError("the light fit needs two usable neighbouring faces or a uniform region")
     channels = radiance.shape[1]
+    if initial is not None and (initial.ndim != 2 or initial.shape[1] != channels):
+        raise InputError(f"initial must be (M, C) with the C = {channels} channels of radiance, got {initial.shape}")
     light = np.zeros((m, channels)) if initial is None else np.array(initial[:m], dtype=float)
     if initial is None:
         light[0] = 1.0
@@ -188,7 +190,7 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     graph = EdgeGraph(i, j, len(faces))
     rows = c_matrix if len(faces) == f else c_matrix[faces]
     # the unknowns' columns (the DC is the gauge without ``indirect``), copied once for the
-    # three channels' Gauss-Newton products
+    # channels' Gauss-Newton products
     columns = np.ascontiguousarray(rows[:, (1 if indirect is None else 0):])
     for c in range(channels):
         light[:, c], albedo[:, c] = _fit_channel(log_radiance[faces, c], rows, columns, graph, member, group,

@@ -96,6 +96,7 @@ def test_unusable_faces_are_ignored():
     (lambda a: {**a, "usable": a["usable"][:-1]}, "radiance must be"),
     (lambda a: {**a, "edges": a["edges"] + len(a["usable"])}, "edges must be"),
     (lambda a: {**a, "labels": np.zeros(3, dtype=int)}, "labels must be"),
+    (lambda a: {**a, "radiance": a["radiance"][:, :1], "initial": np.ones((4, 3))}, "initial must be"),
     (lambda a: {**a, "usable": np.zeros_like(a["usable"])}, "needs two usable"),
 ])
 def test_bad_inputs_are_named(change, match):
