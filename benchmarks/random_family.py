@@ -88,7 +88,7 @@ def distribution(rows: list[dict]) -> str:
     within = np.array([r["within_10"] for r in rows])
     aris = [r["ari"] for r in rows if r["ari"] is not None]
     times = np.array([r["seconds"] for r in rows])
-    seen = np.array([r.get("estimated_of_seen", np.nan) for r in rows], float)
+    seen = np.array([r["estimated_of_seen"] for r in rows], float)
     ari = f"ARI median {np.median(aris):.3f} min {min(aris):.3f}" if aris else "ARI -"
     return (f"n {len(rows):3d}  PSNR median {np.median(psnr):6.2f} p5 {np.percentile(psnr, 5):6.2f} "
             f"min {psnr.min():6.2f}  ±10% median {np.median(within):.3f} p5 {np.percentile(within, 5):.3f} "

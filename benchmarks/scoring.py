@@ -17,8 +17,8 @@ keep_freed_memory()
 
 def seen_faces(caster, views) -> np.ndarray:
     """(F,) bool: the faces some pixel centre of ``views`` hits, from the face-ID buffers of
-    ``caster`` (the estimate's own, when it was passed to :func:`estimator.estimate`: traced
-    once, read here)."""
+    ``caster`` (reused when the estimate traced the same cameras with it; a pose refinement
+    traces its refined cameras, and these are traced again)."""
     seen = np.zeros(caster.mesh.num_faces, dtype=bool)
     for ids in caster.face_id_buffers([v.camera for v in views]):
         seen[ids[ids >= 0]] = True
@@ -28,8 +28,9 @@ def seen_faces(caster, views) -> np.ndarray:
 def score(ds, truth, est, component: str = "diffuse", seen: np.ndarray | None = None) -> dict:
     """PSNR and share within ±10 % (least-squares gauge) of one albedo component, ARI, the
     evaluated faces and the share of faces the estimate holds; with ``seen`` (F,) bool
-    (:func:`seen_faces`) also the share of those faces it holds (``estimated_of_seen``): a face a
-    camera shows but the estimate leaves out is a hole in its texture."""
+    (:func:`seen_faces`) also the share of those faces it holds (``estimated_of_seen``, NaN
+    without a seen face): a face a camera shows but the estimate leaves out is a hole in its
+    texture."""
     irr = true_irradiance(ds.data.mesh, truth)
     mask = evaluation_mask(truth, irr, est.observed, component)
     estimated, true = getattr(est, component), getattr(truth, component)
@@ -38,10 +39,12 @@ def score(ds, truth, est, component: str = "diffuse", seen: np.ndarray | None = 
     ari = (
         metrics.adjusted_rand_index(truth.regions[o], est.labels[o]) if truth.regions is not None and o.any() else None
     )
-    return {"psnr": metrics.albedo_psnr(estimated, true, mask),
-            "within_10": metrics.ratio_summary(lstsq[:, 3])["within_10"], "ari": ari,
-            "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean()),
-            **({} if seen is None else {"estimated_of_seen": float(est.observed[seen].mean()) if seen.any() else 0.0})}
+    out = {"psnr": metrics.albedo_psnr(estimated, true, mask),
+           "within_10": metrics.ratio_summary(lstsq[:, 3])["within_10"], "ari": ari,
+           "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}
+    if seen is not None:   # NaN where no face is seen: the share is undefined, not 0
+        out["estimated_of_seen"] = float(est.observed[seen].mean()) if seen.any() else float("nan")
+    return out
 
 
 def setting(text: str) -> tuple[str, object]:
