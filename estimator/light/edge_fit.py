@@ -153,6 +153,14 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
                          f"got {radiance.shape} and {usable.shape}")
     if edges.ndim != 2 or edges.shape[1] != 2 or (len(edges) and (edges.min() < 0 or edges.max() >= f)):
         raise InputError(f"edges must be (E, 2) face indices below {f}, got shape {edges.shape}")
+    channels = radiance.shape[1]
+    if initial is not None:
+        initial = np.asarray(initial, dtype=float)
+        if initial.ndim != 2 or initial.shape[1] != channels:
+            raise InputError(f"initial must be (M, C) with the C = {channels} channels of radiance, "
+                             f"got {initial.shape}")
+    if indirect is not None and np.shape(indirect) != radiance.shape:
+        raise InputError(f"indirect must be (F, C) like radiance {radiance.shape}, got {np.shape(indirect)}")
     labels = np.full(f, -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
     if labels.shape != (f,):
         raise InputError(f"labels must be (F,) = ({f},), got {labels.shape}")
@@ -165,9 +173,6 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     regions = int(labels.max()) + 1 if len(member) else 0
     if len(i) + len(member) == 0:
         raise InputError("the light fit needs two usable neighbouring faces or a uniform region")
-    channels = radiance.shape[1]
-    if initial is not None and (initial.ndim != 2 or initial.shape[1] != channels):
-        raise InputError(f"initial must be (M, C) with the C = {channels} channels of radiance, got {initial.shape}")
     light = np.zeros((m, channels)) if initial is None else np.array(initial[:m], dtype=float)
     if initial is None:
         light[0] = 1.0

@@ -53,6 +53,10 @@ def test_one_channel_alone_is_fitted_as_within_three(channel):
     assert alone.shape == (4, 1) and alone_albedo.shape == (2, 1)
     np.testing.assert_allclose(alone[:, 0], beside[:, channel], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(alone_albedo[:, 0], beside_albedo[:, channel], rtol=1e-9)
+    indirect = 0.05 * radiance.mean(axis=1, keepdims=True) * np.ones((1, 3))   # a faint additive shading
+    alone, _ = log_shading_fit(radiance[:, [channel]], c_matrix, edges, usable, indirect=indirect[:, [channel]])
+    beside, _ = log_shading_fit(radiance, c_matrix, edges, usable, indirect=indirect)
+    np.testing.assert_allclose(alone[:, 0], beside[:, channel], rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("max_edges", [40, 300])
@@ -97,6 +101,8 @@ def test_unusable_faces_are_ignored():
     (lambda a: {**a, "edges": a["edges"] + len(a["usable"])}, "edges must be"),
     (lambda a: {**a, "labels": np.zeros(3, dtype=int)}, "labels must be"),
     (lambda a: {**a, "radiance": a["radiance"][:, :1], "initial": np.ones((4, 3))}, "initial must be"),
+    (lambda a: {**a, "radiance": a["radiance"][:, :1], "indirect": np.ones((len(a["usable"]), 3))},
+     "indirect must be"),
     (lambda a: {**a, "usable": np.zeros_like(a["usable"])}, "needs two usable"),
 ])
 def test_bad_inputs_are_named(change, match):
