@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core import sh
+from ..light.sun import sun_shadings
 from ..model.estimate import Estimate
 from ..pipeline.exposure import view_gains
 from ..pipeline.prepared import ROW_CHUNK, Prepared
@@ -34,12 +36,37 @@ PLANE_MARGIN = 1e-3         # cosine above a face's plane beyond float32 roundin
 CONDITION_ROWS = 200_000
 
 
+def diffuse_shading(prep: Prepared, est: Estimate) -> np.ndarray:
+    """(F, 3) each face's diffuse shading under the estimate's light, as its solve shaded it.
+
+    The reported light holds a sun the estimate used (``info['sun']``, ``used``) projected to
+    its SH order, where the delta rings and its shadows blur; the solve shaded the faces with
+    the sun's exact shadowed column (:func:`estimator.light.sun.sun_shadings`). So the sun is
+    taken back out of the SH light and its columns, kept on ``prep.visibility`` per direction,
+    added at its reported irradiance. Otherwise C . x of the SH light."""
+    sun = est.info.get("sun")
+    if not (isinstance(sun, dict) and sun.get("used") and "irradiance" in sun):
+        return prep.shading(est.light)
+    sources = [sun] + list(sun.get("others", []))
+    directions = np.array([s["direction"] for s in sources], dtype=float)
+    irradiance = np.array([s["irradiance"] for s in sources], dtype=float)
+    projected = prep.model.unknown_from_radiance(sh.project_directional(sh.order_of(est.light.shape[0]),
+                                                                        directions, irradiance))
+    coat_ior = est.config.coat_ior if sun.get("through_coat") else None
+    key = ("sun columns", directions.tobytes(), coat_ior)
+    columns = prep.visibility.derived.get(key)
+    if columns is None or len(columns) != prep.data.mesh.num_faces:
+        columns = sun_shadings(prep.data.mesh, prep.caster, directions, coat_ior)
+        prep.visibility.derived[key] = columns
+    return prep.shading(est.light - projected) + columns @ irradiance
+
+
 def observation_residuals(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N, 3) residuals of the kept observations under the estimate, (N,) their colour
     norms relative to the exposure level (:func:`estimator.solvers.robust.relative_residuals`), and
-    (N, 3) each row's diffuse shading C . x."""
+    (N, 3) each row's diffuse shading (:func:`diffuse_shading`)."""
     obs = prep.obs
-    shade = prep.shading(est.light)[obs.face]
+    shade = diffuse_shading(prep, est)[obs.face]
     predicted = est.diffuse[obs.face] * shade + est.specular[obs.face] * prep.gloss(est.light)
     return obs.rgb - predicted, relative_residuals(obs.rgb, predicted), shade
 
