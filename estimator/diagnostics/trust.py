@@ -53,9 +53,9 @@ def diffuse_shading(prep: Prepared, est: Estimate) -> np.ndarray:
     projected = prep.model.unknown_from_radiance(sh.project_directional(sh.order_of(est.light.shape[0]),
                                                                         directions, irradiance))
     coat_ior = est.config.coat_ior if sun.get("through_coat") else None
-    key = ("sun columns", directions.tobytes(), coat_ior)
+    key = ("sun columns", directions.tobytes(), coat_ior)   # the shadow function is the mesh's own
     columns = prep.visibility.derived.get(key)
-    if columns is None or len(columns) != prep.data.mesh.num_faces:
+    if columns is None:
         columns = sun_shadings(prep.data.mesh, prep.caster, directions, coat_ior)
         prep.visibility.derived[key] = columns
     return prep.shading(est.light - projected) + columns @ irradiance
