@@ -1,0 +1,59 @@
+"""When ``retinex-segmented`` ties a uniform region's faces to one albedo
+(:func:`estimator.methods.retinex_segmented.edges.tied_regions`): a region of noise holds, with
+the drift noise alone gives, and a texture chained into one region does not."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from estimator import EstimatorConfig
+from estimator.methods.retinex_segmented.edges import tied_regions
+from estimator.methods.retinex_segmented.values import FitContext, Hypothesis, LightSource, Shading
+
+
+def _one_region(albedo: np.ndarray, n: int) -> tuple[FitContext, Hypothesis]:
+    """An n x n grid of faces (4-neighbour edges) under a coloured first-order light, every face
+    in one region, with the per-face ``albedo`` (n * n, 3)."""
+    y, x = np.mgrid[0:n, 0:n] / n
+    normals = np.stack([np.sin(3 * x + 1), np.cos(2 * y), np.sin(2 * x + 3 * y)], -1).reshape(-1, 3)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    columns = np.column_stack([np.ones(n * n), 0.5 * normals])
+    light = np.array([[2.0, 1.5, 1.0], [0.3, -0.2, 0.1], [-0.4, 0.1, 0.2], [0.5, 0.3, -0.1]])
+    idx = np.arange(n * n).reshape(n, n)
+    edges = np.concatenate([np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1),
+                            np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)])
+    usable = np.ones(n * n, bool)
+    ctx = FitContext(SimpleNamespace(), EstimatorConfig(), None, "cauchy", None, edges, usable,
+                     dict(loss="cauchy", iterations=30))
+    h = Hypothesis(albedo * (columns @ light), light / light[0], Shading(columns), albedo, usable,
+                   np.zeros(n * n, np.int64), 1, 1.0, LightSource.EDGES, None)
+    return ctx, h
+
+
+@pytest.mark.parametrize("texture", [False, True])
+def test_a_region_of_noise_holds_and_a_chained_texture_does_not(texture):
+    """One region of 1,600 faces. An albedo with 1 % noise per face and channel holds: each face
+    deviates from the region by sigma and from its neighbour by sqrt(2) sigma, so the drift is
+    1 / sqrt(2) (a Gaussian scale family: the ratio of the two medians is exact in the limit).
+    A smooth wave of +-50 % in log albedo across the region (each face near its neighbours, far
+    from the region's median) deviates beyond ``region_max_deviation`` and drifts beyond
+    ``region_max_drift``: the faces keep their own albedos."""
+    n = 40
+    rng = np.random.default_rng(3)
+    albedo = np.array([0.5, 0.3, 0.2]) * np.exp(rng.normal(0.0, 0.01, (n * n, 3)))
+    if texture:
+        albedo = albedo * np.exp(0.5 * np.sin(3 * np.pi * np.mgrid[0:n, 0:n][1].ravel() / n))[:, None]
+    ctx, h = _one_region(albedo, n)
+    out = tied_regions(ctx, h)
+    config = ctx.config
+    if texture:
+        assert out.source is LightSource.EDGES
+        assert out.deviation > config.region_max_deviation and out.drift > config.region_max_drift
+    else:
+        assert out.source is LightSource.EDGES_AND_REGIONS
+        assert out.drift == pytest.approx(1 / np.sqrt(2), rel=0.15)
+        assert out.deviation < 0.02                                   # 1 % noise: the median face within ~1 %
+        np.testing.assert_array_equal(out.labels, 0)
+        assert np.ptp(out.albedo, axis=0).max() == 0                  # every face takes its region's albedo
