@@ -12,10 +12,10 @@ Each seed's light, material, albedo and camera layout are kept
 subdivisions (the same surface, 5,120 x 4^s faces). It is seen from ``--views`` cameras
 (``--resolution``: their width and height instead of the draw's, e.g. 1024 to score the same
 scene at 4x the resolution). Prints per seed: faces, the faces no pure pixel resolves, observed
-through the pixels they cover (``info["unresolved_faces"]``), the estimated share, of all faces
-and of the faces some pixel centre hits, diffuse PSNR after a per-channel least-squares scale,
-the share within ±10 %, ARI on uniform regions, time per stage and peak RSS. Rows go to
-DIR/dense_scan.json.
+through the pixels they cover (``info["unresolved_faces"]``), the estimated share, of all faces,
+of the faces some pixel centre hits and of those that receive light, diffuse PSNR after a
+per-channel least-squares scale, the share within ±10 %, ARI on uniform regions, time per
+stage and peak RSS. Rows go to DIR/dense_scan.json.
 """
 from __future__ import annotations
 
@@ -109,7 +109,8 @@ def main() -> None:
         print(f"{seed:5d} {strata['geometry']:>6s} {strata['light']:>8s} {strata['material']:>12s} "
               f"{strata['albedo']:>8s} {strata['cameras']:>9s}  {row['faces']} faces, "
               f"{row['unresolved_faces']} unresolved; "
-              f"estimated {row['estimated_share']:.3f} ({row['estimated_of_seen']:.3f} of the seen)  "
+              f"estimated {row['estimated_share']:.3f} ({row['estimated_of_seen']:.3f} of the seen, "
+              f"{row['estimated_of_seen_lit']:.3f} of the seen lit)  "
               f"PSNR {row['psnr']:6.2f} dB  ±10% {row['within_10']:.3f}  "
               f"ARI {ari}  {t['total']:.1f} s (shared {t['observations'] + t['visibility'] + t['reflection']:.1f}, "
               f"solve {t['solve']:.1f}, trust {t['trust']:.1f})  peak {row['peak_mib']:.0f} MiB", flush=True)

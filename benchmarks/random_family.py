@@ -7,8 +7,8 @@
 Develop on seeds 1000 and up; report on seeds 0-99, measured once. Each seed's dataset is
 generated once into DIR (reused when present). Prints one row per seed and method (its strata,
 diffuse-albedo PSNR after a per-channel least-squares scale, share of faces within ±10 %, ARI
-on uniform-region scenes, estimated share of all faces and of the faces some pixel centre sees,
-estimate time), then per method the distribution
+on uniform-region scenes, estimated share of all faces, of the faces some pixel centre sees
+and of those seen faces that receive light, estimate time), then per method the distribution
 over seeds (median, 5th percentile, minimum; the share of seeds with >= 90 % of faces within
 ±10 %) overall and per stratum (light, material, albedo, geometry and camera layout). Rows
 go to DIR/NAME.json. ``--set`` changes an estimator setting for every method (a design
@@ -64,7 +64,7 @@ def run_seed(seed: int, methods: list[str], out: str, profile: str | None,
             est = estimate(ds.data, name, config, caster=caster)
         except InputError as exc:   # a refusal is a result: scored as nothing estimated
             rows.append({"seed": seed, "method": name, **strata, "error": str(exc), "psnr": None, "within_10": 0.0,
-                         "ari": None, "estimated_share": 0.0, "estimated_of_seen": 0.0,
+                         "ari": None, "estimated_share": 0.0, "estimated_of_seen": 0.0, "estimated_of_seen_lit": 0.0,
                          "seconds": time.perf_counter() - t})
             print(f"{seed:5d} {name:20s} refused: {exc}", flush=True)
             continue
@@ -78,7 +78,7 @@ def run_seed(seed: int, methods: list[str], out: str, profile: str | None,
         ari = "-" if row["ari"] is None else f"{row['ari']:.3f}"
         print(f"{seed:5d} {name:20s} {' '.join(f'{strata[k]:>12s}' for k in STRATA)}  PSNR {row['psnr'] or 0:6.2f} dB"
               f"  ±10% {row['within_10']:.3f}  ARI {ari:>5s}  est {row['estimated_share']:.3f}"
-              f" (seen {row['estimated_of_seen']:.3f})  {seconds:5.1f} s",
+              f" (seen {row['estimated_of_seen']:.3f}, seen lit {row['estimated_of_seen_lit']:.3f})  {seconds:5.1f} s",
               flush=True)
     return rows
 
@@ -89,11 +89,13 @@ def distribution(rows: list[dict]) -> str:
     aris = [r["ari"] for r in rows if r["ari"] is not None]
     times = np.array([r["seconds"] for r in rows])
     seen = np.array([r["estimated_of_seen"] for r in rows], float)
+    lit = np.array([r["estimated_of_seen_lit"] for r in rows], float)
     ari = f"ARI median {np.median(aris):.3f} min {min(aris):.3f}" if aris else "ARI -"
     return (f"n {len(rows):3d}  PSNR median {np.median(psnr):6.2f} p5 {np.percentile(psnr, 5):6.2f} "
             f"min {psnr.min():6.2f}  ±10% median {np.median(within):.3f} p5 {np.percentile(within, 5):.3f} "
             f">=0.9 on {np.mean(within >= 0.9):.2f} of seeds  {ari}  seen estimated median "
-            f"{np.nanmedian(seen):.3f} min {np.nanmin(seen):.3f}  time median {np.median(times):.1f} "
+            f"{np.nanmedian(seen):.3f} min {np.nanmin(seen):.3f} (of the seen lit: median {np.nanmedian(lit):.3f} "
+            f"min {np.nanmin(lit):.3f})  time median {np.median(times):.1f} "
             f"max {times.max():.1f} s")
 
 

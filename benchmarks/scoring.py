@@ -9,7 +9,7 @@ import numpy as np
 
 from harness.cli.heap import keep_freed_memory
 from reports import metrics
-from reports.ground_truth import evaluation_mask, true_irradiance
+from reports.ground_truth import evaluation_mask, lit_faces, true_irradiance
 
 # every benchmark that imports this module times the estimator with the heap the command line runs it with
 keep_freed_memory()
@@ -30,7 +30,9 @@ def score(ds, truth, est, component: str = "diffuse", seen: np.ndarray | None = 
     evaluated faces and the share of faces the estimate holds; with ``seen`` (F,) bool
     (:func:`seen_faces`) also the share of those faces it holds (``estimated_of_seen``, NaN
     without a seen face): a face a camera shows but the estimate leaves out is a hole in its
-    texture."""
+    texture; and the share among the seen faces that receive light
+    (``estimated_of_seen_lit``: :func:`reports.ground_truth.lit_faces`, the rule by which the
+    PSNR leaves unlit faces out; a face the environment leaves dark is black in every view)."""
     irr = true_irradiance(ds.data.mesh, truth)
     mask = evaluation_mask(truth, irr, est.observed, component)
     estimated, true = getattr(est, component), getattr(truth, component)
@@ -44,6 +46,8 @@ def score(ds, truth, est, component: str = "diffuse", seen: np.ndarray | None = 
            "evaluated": int(mask.sum()), "estimated_share": float(est.observed.mean())}
     if seen is not None:   # NaN where no face is seen: the share is undefined, not 0
         out["estimated_of_seen"] = float(est.observed[seen].mean()) if seen.any() else float("nan")
+        shown = seen & lit_faces(irr)
+        out["estimated_of_seen_lit"] = float(est.observed[shown].mean()) if shown.any() else float("nan")
     return out
 
 

@@ -108,7 +108,14 @@ def evaluation_mask(truth: GroundTruth, irradiance: np.ndarray, observed: np.nda
     :func:`true_irradiance`.
     """
     albedo = (truth.diffuse if component == "diffuse" else truth.specular) @ LUMINANCE
-    light = irradiance @ LUMINANCE
     big = albedo > min_albedo * max(np.percentile(albedo, 99), 1e-300)
-    lit = light > min_light * max(np.percentile(light, 95), 1e-300)
-    return observed & big & lit
+    return observed & big & lit_faces(irradiance, min_light)
+
+
+def lit_faces(irradiance: np.ndarray, min_light: float = 0.05) -> np.ndarray:
+    """(F,) bool: the faces whose true irradiance (F, 3) (:func:`true_irradiance`, luminance)
+    exceeds ``min_light`` x its 95th percentile over the faces. A face below it (turned to an
+    unlit part of the environment, as a sky's underside) is dark in every view, whatever its
+    albedo: no estimate can be judged there."""
+    light = irradiance @ LUMINANCE
+    return light > min_light * max(np.percentile(light, 95), 1e-300)
