@@ -11,7 +11,7 @@ def _truth(albedo: np.ndarray) -> GroundTruth:
 
 def test_faces_the_light_leaves_dark_are_not_lit():
     """Twenty faces at irradiance 1 and a grey light, one at 4 % and one at 6 % of it, one at 0
-    (turned to a sky's dark underside): at the default 5 % the first and last are unlit. The
+    (turned to a sky's dark underside): at the default 5 % the 4 % and the 0 faces are unlit. The
     luminance decides, so a face lit in one channel only counts by that channel's weight."""
     irradiance = np.vstack([np.ones((20, 3)), [[0.04] * 3, [0.06] * 3, [0.0] * 3, [0.0, 0.0, 0.9]]])
     lit = lit_faces(irradiance)
@@ -30,3 +30,6 @@ def test_the_evaluation_mask_is_the_observed_lit_faces_of_non_negligible_albedo(
     expected = np.ones(22, bool)
     expected[[3, 5, 20, 21]] = False
     np.testing.assert_array_equal(mask, expected)
+    irradiance[20] = 0.06                                             # lit at 5 %, not at 7 %
+    assert evaluation_mask(_truth(albedo), irradiance, observed, "diffuse")[20]
+    assert not evaluation_mask(_truth(albedo), irradiance, observed, "diffuse", min_light=0.07)[20]

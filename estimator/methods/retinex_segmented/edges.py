@@ -49,8 +49,9 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
     deviation (the median over their faces of the mean over channels of |log(face albedo /
     region albedo)|, each face's own albedo under the tied light) is at most
     ``region_max_deviation``, or its drift (that deviation over the same median between
-    neighbouring faces of a region: noise alone gives 1 / sqrt(2), a texture chained into one
-    region by small steps drifts further) is at most ``region_max_drift``.
+    neighbouring faces of a region: independent Gaussian noise alone gives about 1 / sqrt(2),
+    a texture chained into one region by small steps drifts further) is at most
+    ``region_max_drift``.
 
     Returns the tied hypothesis, or ``edges_only`` with the deviation and drift measured."""
     c, h = ctx.config, edges_only

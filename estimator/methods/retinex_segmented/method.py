@@ -32,26 +32,28 @@ class RegionConfig(Section):
 
     Attributes
     ----------
-    retinex_min_uniform_share : faces are tied to regions only when this share of the lit
-        faces lies in one (a majority); below it the object is a texture and the edges alone
-        set the light.
+    retinex_min_uniform_share : faces are tied to regions only when at least this share of
+        the lit faces lies in some uniform region; below it the object is a texture and the
+        edges alone set the light.
     region_max_deviation, region_max_drift : the regions are dropped (a texture) when, under
         the light fitted with them tied, the median face's own albedo deviates from its
         region's (mean over channels of |log ratio|) by more than ``region_max_deviation``
         *and* by more than ``region_max_drift`` times the median such difference between
-        neighbouring faces of a region (noise alone gives 1 / sqrt(2)).
+        neighbouring faces of a region (independent Gaussian noise alone gives about
+        1 / sqrt(2)).
 
     The three were chosen on the shipped probes. Measured since on the random family's 20
     development seeds, one setting changed at a time (PSNR summed over the seeds): the share
     0.3 lost 10.5 dB (a bunny with a texture beside uniform parts tied its texture) and 0.7
     lost 3.0; the deviation 0.04 lost 2.5 (one seed) and 0.1 changed nothing, but the Earth
     texture of the real-light textured diffuse park deviates by 0.086, so 0.1 would tie it;
-    the drift 1.4 lost 1.0 (one seed +1.9 dB, another -2.9) and 2.5 gained 1.0 (one seed). A
-    drift bound from the Bayesian information criterion, sqrt(ln(n) / 2) for the tied faces'
-    n colour values (each face's own albedo 3 unknowns at (1/2) ln n; about 2.2 at 4,000
-    faces), decided as 1.85 does on all 40 development and validation seeds, but tied the
-    Earth texture of three real-light cases (drift 2.1: a texture's neighbours differ by more
-    than noise), which lost 11-13 dB each.
+    the drift 1.4 lost 1.0 (one seed +1.9 dB, another -2.9) and 2.5 gained 1.0 (one seed), but
+    the Earth texture drifts by 2.1, so 2.5 would tie it too. A drift bound from the Bayesian
+    information criterion, sqrt(ln(n) / 2) for the n colour values of the tied faces (3 per
+    face; each face's own albedo 3 unknowns at (1/2) ln n; about 2.2 at 4,000 faces),
+    decided as 1.85 does on all 40 development and validation seeds, but tied the Earth
+    texture of three real-light cases (a texture's neighbours differ by more than noise),
+    which lost 11-13 dB each.
     """
 
     retinex_min_uniform_share: float = 0.5
