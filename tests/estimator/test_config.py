@@ -19,7 +19,7 @@ WIRE_NAMES = (
     "lm_damping_lower", "lm_damping_max", "robust_loss", "robust_rounds", "glint_ratio", "segment_threshold",
     "uniform_spread", "albedo_prior", "retinex_quantile", "retinex_ridge", "retinex_iterations", "retinex_max_edges",
     "sun_min_gain", "max_suns", "coat_correction", "coat_per_region", "coat_ior", "coat_order", "coat_lobe",
-    "coat_min_share", "coat_max_negative",
+    "coat_level", "coat_min_share", "coat_max_negative",
     "reflected_light", "reflected_regions", "reflected_sun_max_ratio",
     "reflected_sun_max_angle", "reflected_lobe", "interreflection",
     "min_brightness", "bandwidth", "split_bandwidth", "min_cluster_fraction", "recluster_rounds",

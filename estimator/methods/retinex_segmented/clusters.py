@@ -34,7 +34,8 @@ from .values import FitContext, LightSource, ReflectionFits, Solution
 RESOLVED_PIXELS = (1.0 / (1.0 - 0.5 ** 0.5)) ** 2
 
 # what the estimate of the whole mesh keeps from the clustered problem's: how its light was chosen
-CARRIED = ("hypotheses", "coat_weight", "coat_costs", "coat_degree", "reflection_explained", "lobe_explained")
+CARRIED = ("hypotheses", "coat_level", "coat_weight", "coat_costs", "coat_degree", "reflection_explained",
+           "lobe_explained")
 
 
 def face_clusters(mesh, observed: np.ndarray, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -94,15 +95,18 @@ def solve_on_clusters(method, prep: Prepared, observed: np.ndarray, count: int) 
 
 def extend(method, prep: Prepared, part: Solution) -> Estimate:
     """The estimate of every face of ``prep`` under the light of ``part`` (the clustered
-    problem's :class:`Solution`): its coat's reflection subtracted from every observation, each
-    face's diffuse radiance (the ``retinex_quantile``, or with a light from the coat's map, the
-    radiance under that map, :func:`coat_map.diffuse_radiance`) over its shading under that
-    light (its sun's shadowed column, and the light the object reflects onto it with
+    problem's :class:`Solution`): its coat's level and reflection subtracted from every
+    observation, each face's diffuse radiance (the ``retinex_quantile``, or with a light from
+    the coat's map, the radiance under that map, :func:`coat_map.diffuse_radiance`) over its
+    shading under that light (its sun's shadowed column, and the light the object reflects onto it with
     ``interreflection``); where the clustered problem tied uniform regions, the regions are
     found again on the whole mesh under that light (faces near a region in albedo join it, as in
     :func:`.edges.tied_regions`) and each takes its faces' median albedo."""
     c, h, model = method.config, part.hypothesis, method.model
     mesh, obs = prep.data.mesh, prep.obs
+    if part.level.any():   # the coat's level, in every view
+        obs = replace(obs, rgb=obs.rgb - part.level)
+        prep = replace(prep, obs=obs)
     if part.coat is not None:
         normals = mesh.face_normals[obs.face]
         escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)

@@ -16,6 +16,7 @@ from ...model.estimate import Estimate
 from ..base import Method, register_method
 from .clusters import carried, cluster_count, solve_on_clusters
 from .decision import choose, light_hypotheses, prediction_cost
+from .level import coat_level
 from .result import to_estimate
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
 
@@ -104,6 +105,10 @@ class RetinexSegmented(Method):
        hypothesis); of the uncorrected and the corrected fits the one that predicts the colours
        as recorded (a coat's reflection added back) at the lowest
        :func:`.decision.prediction_cost` is kept, the weights its unknowns (three with one weight).
+       With ``coat_level``, where some of those reflections is worth trying, the level the coat's
+       reflection adds to every view of a face is found first from the albedo edges, alternated
+       with the light (:mod:`.level`); where the edges' criterion keeps it, it is subtracted
+       from every colour and steps 1-5 run again before the reflections are fitted.
 
     With ``interreflection`` each face's shading also holds the light the object reflects
     onto it (:mod:`estimator.light.indirect`). Beside the edges' light, the light of the coat's
@@ -145,19 +150,46 @@ class RetinexSegmented(Method):
         est, chosen = self._fit(prep, fits)
         self.log(f"light from {est.info['light_from']} ({est.info['uniform_regions']} uniform regions), "
                  f"{time.perf_counter() - t:.1f} s")
-        weight, applied = np.zeros((1, 3)), None
+        weight, applied, level = np.zeros((1, 3)), None, np.zeros(3)
         if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
-            est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t, keep_regions)
+            candidates = self._coat_candidates(prep, est)
+            if c.coat_level and candidates:   # a glossy layer's reflection is seen: its level too
+                est, chosen, level = self._remove_level(prep, fits, est, chosen)
+                if level.any():   # the candidates again, on the colours less the level, under the new light
+                    prep, candidates = replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - level)), None
+            if not LightSource(est.info["light_from"]).models_the_coat:
+                est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
             if applied is not None:
                 weight = applied.weight
+        est.info["coat_level"] = level.tolist()
         est.info["coat_degree"] = None if applied is None else applied.order
         est.info["coat_exponent"] = None if applied is None else applied.exponent
         est.info["coat_weight"] = weight.tolist()
         est.info["clustering_s"] = time.perf_counter() - t
-        return Solution(est, chosen, applied, fits)
+        return Solution(est, chosen, applied, fits, level)
+
+    def _remove_level(self, prep, fits: ReflectionFits, est: Estimate,
+                      chosen: Hypothesis) -> tuple[Estimate, Hypothesis, np.ndarray]:
+        """The coat's view-independent level (:func:`.level.coat_level`) under the first fit;
+        where the edges' criterion keeps it, subtracted from every colour and steps 1-5 run
+        again (the sun found the first time reused). Returns the estimate, its hypothesis and
+        the (3,) level (0: none kept, the first fit unchanged)."""
+        c = self.config
+        fit = dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
+                   max_edges=c.retinex_max_edges)
+        found = coat_level(chosen, prep.edges, prep.c_matrix[:, 0] > 0, fits.transfer if c.interreflection else None,
+                           fit, c.coat_max_negative)
+        self.log(f"coat's level: {np.round(found.level, 6).tolist()} (edges' cost lower by {found.gain:.1f}, "
+                 f"price {found.price:.1f})")
+        if not found.level.any():
+            return est, chosen, found.level
+        sun_found = chosen.found and replace(chosen.found, evaluations=0)   # the first fit's sun, not searched again
+        est, chosen = self._fit(replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - found.level)), fits, sun_found)
+        return est, chosen, found.level
 
     def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis, t: float,
-                      keep_regions: bool = True) -> tuple[Estimate, Hypothesis, CoatReflection | None]:
+                      keep_regions: bool = True, candidates: list[tuple[CoatReflection, np.ndarray]] | None = None
+                      ) -> tuple[Estimate, Hypothesis, CoatReflection | None]:
         """Step 6: the coat's reflection of the environment's mean level (SH degree 0), of the
         light's low orders (``coat_order``) and, with ``coat_lobe``, a Phong lobe's
         (:meth:`_lobe_shape`), each fitted to the colours' changes across views,
@@ -166,8 +198,39 @@ class RetinexSegmented(Method):
         are, are one more hypothesis); the uncorrected and the corrected fits are judged by
         :func:`.decision.prediction_cost` on the colours as observed (each coat's reflection
         added back, one unknown per region's strength and two for the grey coat's shared
-        colour: three with one group; the lobe's exponent one more). Returns the estimate kept,
-        its hypothesis and the reflection subtracted before it (None: none)."""
+        colour: three with one group; the lobe's exponent one more). ``candidates``: those of
+        :meth:`_coat_candidates` on these colours under ``est`` (None: found here). Returns the
+        estimate kept, its hypothesis and the reflection subtracted before it (None: none)."""
+        c, obs = self.config, prep.obs
+        candidates = self._coat_candidates(prep, est) if candidates is None else candidates
+        group = coat_groups(est, c.coat_per_region)[0][obs.face]
+        est.info["coat_costs"] = None
+        if not candidates:
+            return est, chosen, None
+        found = chosen.found and replace(chosen.found, evaluations=0)   # the first fit's sun, not searched again
+        regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
+        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions)
+                  for _, reflection in candidates]
+        # a coat's unknowns: its groups' strengths and two of the grey colour; a lobe's exponent one more
+        costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
+                                [0] + [len(np.unique(group)) + 2 + (r.exponent is not None) for r, _ in candidates])
+        best = int(np.argmin(costs))
+        named = {"none": float(costs[0]), **{coat_name(r): float(x) for (r, _), x in zip(candidates, costs[1:])}}
+        costs_text = ", ".join(f"{name} {cost:.1f}" for name, cost in named.items())
+        self.log(f"coat's reflection: costs {costs_text}; {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
+        applied = None
+        if best:
+            (est, chosen), applied = fitted[best - 1], candidates[best - 1][0]
+        est.info["coat_costs"] = named
+        return est, chosen, applied
+
+    def _coat_candidates(self, prep, est: Estimate) -> list[tuple[CoatReflection, np.ndarray]]:
+        """The coat's reflections worth trying on the colours of ``prep`` under ``est``'s light:
+        of the environment's mean level (SH degree 0), of the light's low orders (``coat_order``)
+        and, with ``coat_lobe``, a Phong lobe's (:meth:`_lobe_shape`), each fitted to the colours'
+        changes across views and scaled down to ``coat_max_negative``; those whose median
+        reflection exceeds ``coat_min_share`` of the colours, each with its (N, 3) reflection.
+        Empty: the colours show no coat's reflection (a matte object)."""
         c, obs = self.config, prep.obs
         normals = prep.data.mesh.face_normals[obs.face]
         escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
@@ -188,25 +251,7 @@ class RetinexSegmented(Method):
             reflection = weight[group] * rows
             if np.median(np.linalg.norm(reflection, axis=1)) > level:     # else negligible: not tried
                 candidates.append((replace(reflected, weight=weight), reflection))
-        est.info["coat_costs"] = None
-        if not candidates:
-            return est, chosen, None
-        found = chosen.found and replace(chosen.found, evaluations=0)   # the first fit's sun, not searched again
-        regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
-        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions)
-                  for _, reflection in candidates]
-        # a coat's unknowns: its groups' strengths and two of the grey colour; a lobe's exponent one more
-        costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
-                                [0] + [len(np.unique(group)) + 2 + (r.exponent is not None) for r, _ in candidates])
-        best = int(np.argmin(costs))
-        named = {"none": float(costs[0]), **{coat_name(r): float(x) for (r, _), x in zip(candidates, costs[1:])}}
-        costs_text = ", ".join(f"{name} {cost:.1f}" for name, cost in named.items())
-        self.log(f"coat's reflection: costs {costs_text}; {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
-        applied = None
-        if best:
-            (est, chosen), applied = fitted[best - 1], candidates[best - 1][0]
-        est.info["coat_costs"] = named
-        return est, chosen, applied
+        return candidates
 
     def _lobe_shape(self, obs, normals: np.ndarray, light: np.ndarray, escapes: np.ndarray, group: np.ndarray,
                     groups: int) -> tuple[CoatReflection, np.ndarray]:

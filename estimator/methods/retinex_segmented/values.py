@@ -174,9 +174,11 @@ class CoatReflection:
 @dataclass
 class Solution:
     """What a held solve found: the estimate, the hypothesis it came from, the coat's
-    reflection subtracted before its fit (None: none) and its view-dependent fits."""
+    reflection subtracted before its fit (None: none), its view-dependent fits and the coat's
+    view-independent level (3,) subtracted from every colour before both (0: none)."""
 
     estimate: Estimate
     hypothesis: Hypothesis
     coat: CoatReflection | None
     fits: ReflectionFits
+    level: np.ndarray = field(default_factory=lambda: np.zeros(3))
