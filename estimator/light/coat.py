@@ -73,13 +73,9 @@ class CoatConfig(Section):
     coat_level : where a coat's reflection is seen (some reflection this correction tries exceeds
         ``coat_min_share``), also find the level that reflection adds to every view of a face,
         from the albedo edges together with the light (:mod:`estimator.light.coat_level`), and
-        subtract it before the light is fitted again and the coat corrected. Off by default: on
-        the random family's 40 development and validation seeds it left both medians as they
-        were and gained 8.2 dB of PSNR summed (the share within ±10 % from 0.32-0.38 to
-        0.84-0.86 on two coated seeds), but on the real-light family it lost 12 and 4 dB on
-        two coated objects under one probe while gaining 16-17 dB on two under another: the
-        level's colour comes from the shading's per-channel scale, which only the faint
-        interreflection sets (docs/estimator.md).
+        subtract it before the light is fitted again and the coat corrected. Off by default: it
+        does not hold on every coated object (under some probes it bends a channel's light and
+        the albedo ratios between regions; docs/estimator.md).
     coat_min_share : the coat is removed only when its median share of the colours exceeds this.
     coat_max_negative : the fitted weight is scaled down until subtracting it turns at most
         this share more of the observations non-positive (a coat cannot reflect more than a

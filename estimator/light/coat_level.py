@@ -13,11 +13,13 @@ is that albedo difference relative to the faces' albedos without the level: its 
 radiance's relative noise whatever b, so no level shrinks it (in the log domain, a negative
 level flattens every ratio towards 0, and a positive one amplifies the dark faces' noise).
 It is linear in b. A dielectric coat and a white lobe reflect every wavelength alike, so the
-level is grey in the shading's units: b_c = beta * S_c, S_c the median shading of channel c,
-one unknown beta >= 0 for the three channels, fitted by iteratively reweighted least squares
-under a Cauchy loss. It is kept when it lowers the edges' Cauchy negative log-likelihood by more
-than (1/2) ln n, n the residuals (the Bayesian information criterion, as the sun's), and capped
-so that at most ``max_negative`` of the usable faces' radiance turns non-positive (a reflection
+level has the colour of the reflection itself (the environment's): b = beta * k, k (3,) that
+colour (given by the caller: the light's own, with the interreflection term), one unknown
+beta >= 0 for the three channels, fitted by iteratively reweighted least squares under a Cauchy
+loss on each channel's robust scale of e_ij(0) (the residuals without the level). It is kept
+when it lowers that Cauchy negative log-likelihood by more than (1/2) ln n, n the residuals
+(the Bayesian information criterion, as the sun's), and capped so that at most
+``max_negative`` of the usable faces have a channel of radiance at or below it (a reflection
 cannot exceed what the pixels show, as :func:`estimator.light.coat.admissible_scale`).
 """
 from __future__ import annotations
@@ -52,8 +54,8 @@ class CoatLevel:
 
 
 def level_from_edges(radiance: np.ndarray, shade: np.ndarray, edges: np.ndarray, usable: np.ndarray,
-                     max_negative: float) -> CoatLevel:
-    """The grey level b_c = beta S_c that makes the albedos of neighbouring faces agree best.
+                     colour: np.ndarray, max_negative: float) -> CoatLevel:
+    """The level b = beta k of colour k that makes the albedos of neighbouring faces agree best.
 
     Parameters
     ----------
@@ -61,6 +63,7 @@ def level_from_edges(radiance: np.ndarray, shade: np.ndarray, edges: np.ndarray,
     shade : (F, 3) each face's shading under the light (radiance = albedo x shade + level).
     edges : (E, 2) pairs of neighbouring faces.
     usable : (F,) bool, faces whose radiance and shading are positive and enter the fit.
+    colour : (3,) >= 0, not all 0: the level's colour in radiance units (its scale is free).
     max_negative : at most this share of the usable faces may have a channel of radiance at or
         below the level.
 
@@ -72,8 +75,12 @@ def level_from_edges(radiance: np.ndarray, shade: np.ndarray, edges: np.ndarray,
     if radiance.shape != (f, 3) or shade.shape != (f, 3) or usable.shape != (f,):
         raise InputError(f"radiance and shade must be (F, 3) and usable (F,), got {radiance.shape}, "
                          f"{shade.shape} and {usable.shape}")
-    if edges.ndim != 2 or edges.shape[1] != 2:
-        raise InputError(f"edges must be (E, 2), got {edges.shape}")
+    if edges.ndim != 2 or edges.shape[1] != 2 or not np.issubdtype(edges.dtype, np.integer) or (
+            len(edges) and (edges.min() < 0 or edges.max() >= f)):
+        raise InputError(f"edges must be (E, 2) face indices below {f}, got shape {edges.shape} of {edges.dtype}")
+    colour = np.asarray(colour, dtype=float)
+    if colour.shape != (3,) or not np.all(np.isfinite(colour) & (colour >= 0)) or not colour.any():
+        raise InputError(f"the level's colour must be (3,), finite, >= 0 and not all 0, got {colour}")
     if not 0 <= max_negative < 1:
         raise InputError(f"max_negative must lie in [0, 1), got {max_negative}")
     usable = usable & np.all(np.isfinite(radiance) & (radiance > 0) & np.isfinite(shade) & (shade > 0), axis=1)
@@ -83,7 +90,6 @@ def level_from_edges(radiance: np.ndarray, shade: np.ndarray, edges: np.ndarray,
     none = CoatLevel(np.zeros(3), 0.0, 0.0)
     if len(i) < 2:
         return none
-    colour = np.median(shade[usable], axis=0)                                   # (3,) S_c, > 0
     inverse = 1.0 / np.where(usable[:, None], shade, 1.0)                       # (F, 3)
     albedo = radiance * inverse
     middle = 0.5 * (albedo[i] + albedo[j])                                      # (E', 3)
@@ -91,12 +97,13 @@ def level_from_edges(radiance: np.ndarray, shade: np.ndarray, edges: np.ndarray,
     slope = colour * (inverse[i] - inverse[j]) / middle                         # -d e_ij / d beta
     scale = np.array([robust.robust_scale(np.abs(base[:, c]), floor=1e-12) for c in range(3)])
     base, slope = (base / scale).ravel(), (slope / scale).ravel()               # in units of each channel's scale
-    cap = float(np.min(np.quantile(radiance[usable], max_negative, axis=0) / colour))
+    # at most max_negative of the usable faces with some channel at or below the level
+    shown = colour > 0
+    cap = float(np.quantile(np.min(radiance[usable][:, shown] / colour[shown], axis=1), max_negative))
     beta = 0.0
     for _ in range(ROUNDS):
         weights = robust.irls_weights(np.abs(base - beta * slope), "cauchy", 1.0)
-        beta = float(np.clip(np.sum(weights * base * slope) / max(np.sum(weights * slope * slope), 1e-300),
-                             0.0, max(cap, 0.0)))
+        beta = float(np.clip(np.sum(weights * base * slope) / max(np.sum(weights * slope * slope), 1e-300), 0.0, cap))
     tuning = robust.TUNING["cauchy"]
     gain = float(np.sum(np.log1p((base / tuning) ** 2)) - np.sum(np.log1p(((base - beta * slope) / tuning) ** 2)))
     price = 0.5 * float(np.log(len(base)))

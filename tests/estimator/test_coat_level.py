@@ -37,12 +37,12 @@ def _grid(n: int = 40, seed: int = 0):
 
 
 def test_a_grey_level_is_recovered_under_the_true_light():
-    """radiance = albedo x shade + 0.15 S_c (S_c the median shading): the fitted level is the
-    one added, within 3 %, and it explains the edges far beyond its price."""
-    columns, light, edges, albedo, labels, shade = _grid()
-    colour = np.median(shade, axis=0)
+    """radiance = albedo x shade + 0.15 k, k a reflection's colour: the fitted level is the one
+    added, within 3 %, and it explains the edges far beyond its price."""
+    _, _, edges, albedo, _, shade = _grid()
+    colour = np.array([0.5, 0.4, 0.3])
     added = 0.15 * colour
-    found = level_from_edges(albedo * shade + added, shade, edges, np.ones(len(shade), bool), 0.01)
+    found = level_from_edges(albedo * shade + added, shade, edges, np.ones(len(shade), bool), colour, 0.01)
     np.testing.assert_allclose(found.level, added, rtol=0.03)
     assert found.gain > 10 * found.price
 
@@ -50,38 +50,47 @@ def test_a_grey_level_is_recovered_under_the_true_light():
 def test_a_matte_object_keeps_no_level():
     """Without a level the albedo edges give nothing for one to explain: it is 0 (the criterion
     refuses what noise alone gains)."""
-    columns, light, edges, albedo, labels, shade = _grid(seed=1)
-    found = level_from_edges(albedo * shade, shade, edges, np.ones(len(shade), bool), 0.01)
+    _, _, edges, albedo, _, shade = _grid(seed=1)
+    found = level_from_edges(albedo * shade, shade, edges, np.ones(len(shade), bool), np.ones(3), 0.01)
     np.testing.assert_array_equal(found.level, 0.0)
     assert found.gain <= found.price
 
 
 def test_the_level_is_capped_by_the_radiance_it_may_turn_non_positive():
-    """A level far above the dark quadrant's radiance would turn it negative: at most
-    ``max_negative`` of the usable faces have a channel at or below the level found."""
-    columns, light, edges, albedo, labels, shade = _grid(seed=2)
-    radiance = albedo * shade + 0.15 * np.median(shade, axis=0)
-    radiance[labels == 1] *= 0.3                       # a dark quadrant below the level's share
-    found = level_from_edges(radiance, shade, edges, np.ones(len(shade), bool), 0.01)
-    assert found.level.any()
-    assert np.mean(np.any(radiance <= found.level, axis=1)) <= 0.01 + 1e-12
+    """3 % of the faces, scattered, show 2 % of their radiance in one channel (a glint's
+    shadow, a dark speck): the edges still ask for the level added, but it would leave those
+    faces a channel at or below it. The cap binds: at most ``max_negative`` of the usable faces
+    have some channel at or below the level found, which is the cap itself."""
+    _, _, edges, albedo, _, shade = _grid(seed=2)
+    colour = np.array([0.5, 0.4, 0.3])
+    added = 0.15 * colour
+    radiance = albedo * shade + added
+    rng = np.random.default_rng(4)
+    dark = rng.choice(len(shade), int(0.03 * len(shade)), replace=False)
+    radiance[dark, rng.integers(0, 3, len(dark))] *= 0.02
+    found = level_from_edges(radiance, shade, edges, np.ones(len(shade), bool), colour, 0.01)
+    cap = np.quantile(np.min(radiance / colour, axis=1), 0.01)
+    assert cap * colour[0] < 0.9 * added[0]
+    np.testing.assert_allclose(found.level, cap * colour, rtol=1e-9)
+    assert np.mean(np.any(radiance <= found.level, axis=1)) <= 0.01 + 1.0 / len(shade)
 
 
 def test_the_light_and_the_level_are_found_together():
     """The level flattens a light fitted to the edges, so under that light the level comes out
-    too small; alternated with the light (:func:`coat_level`), it comes near the level added.
-    The light's mean level is grey here, so the shading's colour in the unit-DC gauge of the
-    fit is the level's (with the interreflection, the light's own scale carries its colour)."""
+    too small; alternated with the light (:func:`coat_level`), it comes near the level added,
+    of the shading's colour (the light's mean level is grey here, as the fit's unit-DC gauge
+    takes it)."""
     from estimator.methods.retinex_segmented.level import coat_level
     from estimator.methods.retinex_segmented.values import Hypothesis, LightSource, Shading
 
-    columns, light, edges, albedo, labels, shade = _grid(seed=3)
-    added = 0.15 * np.median(shade, axis=0)
+    columns, _, edges, albedo, labels, shade = _grid(seed=3)
+    colour = np.median(shade, axis=0)
+    added = 0.15 * colour
     radiance = albedo * shade + added
     usable = np.ones(len(shade), bool)
     fit = dict(loss="cauchy", ridge=1e-9, iterations=30)
     first, _ = log_shading_fit(radiance, columns, edges, usable, labels, **fit)
-    under_first = level_from_edges(radiance, columns @ first, edges, usable, 0.01).level
+    under_first = level_from_edges(radiance, columns @ first, edges, usable, colour, 0.01).level
     h = Hypothesis(radiance, first, Shading(columns), radiance / (columns @ first), usable, labels, 4, 1.0,
                    LightSource.EDGES_AND_REGIONS, None)
     together = coat_level(h, edges, usable, None, fit, 0.01).level
@@ -93,11 +102,16 @@ def test_the_light_and_the_level_are_found_together():
     (dict(radiance=np.ones((5, 2))), "radiance and shade must be"),
     (dict(usable=np.ones(4, bool)), "radiance and shade must be"),
     (dict(edges=np.zeros((3, 3), np.int64)), "edges must be"),
+    (dict(edges=np.array([[0, 5]])), "edges must be"),
+    (dict(edges=np.zeros((2, 2))), "edges must be"),
+    (dict(colour=np.zeros(3)), "colour must be"),
+    (dict(colour=np.array([1.0, -1.0, 1.0])), "colour must be"),
     (dict(max_negative=1.0), "max_negative"),
 ])
 def test_bad_inputs_are_named(change, match):
+    """Each malformed input raises an InputError that names it."""
     args = dict(radiance=np.ones((5, 3)), shade=np.ones((5, 3)), edges=np.zeros((2, 2), np.int64),
-                usable=np.ones(5, bool), max_negative=0.01)
+                usable=np.ones(5, bool), colour=np.ones(3), max_negative=0.01)
     args.update(change)
     with pytest.raises(InputError, match=match):
         level_from_edges(**args)

@@ -105,7 +105,7 @@ class RetinexSegmented(Method):
        hypothesis); of the uncorrected and the corrected fits the one that predicts the colours
        as recorded (a coat's reflection added back) at the lowest
        :func:`.decision.prediction_cost` is kept, the weights its unknowns (three with one weight).
-       With ``coat_level``, where some of those reflections is worth trying, the level the coat's
+       With ``coat_level``, where some of those reflections are worth trying, the level the coat's
        reflection adds to every view of a face is found first from the albedo edges, alternated
        with the light (:mod:`.level`); where the edges' criterion keeps it, it is subtracted
        from every colour and steps 1-5 run again before the reflections are fitted.
@@ -139,8 +139,9 @@ class RetinexSegmented(Method):
         return self.solve_held(prep).estimate
 
     def solve_held(self, prep, keep_regions: bool = True) -> Solution:
-        """Steps 1-6 on a problem whose rows are held; the estimate with the hypothesis it came
-        from and the coat's reflection subtracted before it (what :func:`.clusters.extend`
+        """Steps 1-6 on a problem whose rows are held (with ``coat_level``, the coat's level
+        removed before step 6); the estimate with the hypothesis it came from, the coat's level
+        and the coat's reflection subtracted before it (what :func:`.clusters.extend`
         carries from clusters to faces). ``keep_regions``: offer the coat's refits the first
         fit's regions tied as they are (off on clusters, whose regions the extension to faces
         finds again by segmentation: regions kept without it could not be carried)."""
@@ -157,8 +158,7 @@ class RetinexSegmented(Method):
                 est, chosen, level = self._remove_level(prep, fits, est, chosen)
                 if level.any():   # the candidates again, on the colours less the level, under the new light
                     prep, candidates = replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - level)), None
-            if not LightSource(est.info["light_from"]).models_the_coat:
-                est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
+            est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
             if applied is not None:
                 weight = applied.weight
         est.info["coat_level"] = level.tolist()
@@ -173,7 +173,8 @@ class RetinexSegmented(Method):
         """The coat's view-independent level (:func:`.level.coat_level`) under the first fit;
         where the edges' criterion keeps it, subtracted from every colour and steps 1-5 run
         again (the sun found the first time reused). Returns the estimate, its hypothesis and
-        the (3,) level (0: none kept, the first fit unchanged)."""
+        the (3,) level (0: none kept, or the refit took its light from the coat's map, whose fit
+        still holds the level; the first fit unchanged)."""
         c = self.config
         fit = dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
                    max_edges=c.retinex_max_edges)
@@ -184,8 +185,11 @@ class RetinexSegmented(Method):
         if not found.level.any():
             return est, chosen, found.level
         sun_found = chosen.found and replace(chosen.found, evaluations=0)   # the first fit's sun, not searched again
-        est, chosen = self._fit(replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - found.level)), fits, sun_found)
-        return est, chosen, found.level
+        refit, hypothesis = self._fit(replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - found.level)), fits,
+                                      sun_found)
+        if LightSource(refit.info["light_from"]).models_the_coat:
+            return est, chosen, np.zeros(3)
+        return refit, hypothesis, found.level
 
     def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis, t: float,
                       keep_regions: bool = True, candidates: list[tuple[CoatReflection, np.ndarray]] | None = None
@@ -196,7 +200,8 @@ class RetinexSegmented(Method):
         scaled down to ``coat_max_negative``, subtracted, and steps 1-5 run again (reusing the
         sun found the first time; with ``keep_regions`` the first fit's regions, tied as they
         are, are one more hypothesis); the uncorrected and the corrected fits are judged by
-        :func:`.decision.prediction_cost` on the colours as observed (each coat's reflection
+        :func:`.decision.prediction_cost` on the colours of ``prep`` (as observed, less the
+        coat's level where one was removed; each coat's reflection
         added back, one unknown per region's strength and two for the grey coat's shared
         colour: three with one group; the lobe's exponent one more). ``candidates``: those of
         :meth:`_coat_candidates` on these colours under ``est`` (None: found here). Returns the
