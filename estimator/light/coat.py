@@ -74,8 +74,8 @@ class CoatConfig(Section):
         ``coat_min_share``), also find the level that reflection adds to every view of a face,
         from the albedo edges together with the light (:mod:`estimator.light.coat_level`), and
         subtract it before the light is fitted again and the coat corrected. Off by default: it
-        does not hold on every coated object (under some probes it bends a channel's light and
-        the albedo ratios between regions; docs/estimator.md).
+        does not hold on every coated object (under some probes it moves one channel's albedo
+        ratios between regions; docs/estimator.md).
     coat_min_share : the coat is removed only when its median share of the colours exceeds this.
     coat_max_negative : the fitted weight is scaled down until subtracting it turns at most
         this share more of the observations non-positive (a coat cannot reflect more than a
