@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -13,12 +14,18 @@ from ...core.reductions import group_quantile
 from ...core.settings import Section
 from ...light import coat, indirect, sun
 from ...model.estimate import Estimate
+from ...pipeline.prepared import Prepared
 from ..base import Method, register_method
 from .clusters import carried, cluster_count, solve_on_clusters
 from .decision import choose, light_hypotheses, prediction_cost
 from .level import coat_level
 from .result import to_estimate
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
+
+
+def first_sun(chosen: Hypothesis) -> sun.Sun | None:
+    """The sun a first fit found, for its refits: not searched again (no evaluations)."""
+    return chosen.found and replace(chosen.found, evaluations=0)
 
 
 def coat_name(reflected: CoatReflection) -> str:
@@ -155,9 +162,9 @@ class RetinexSegmented(Method):
         if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
             candidates = self._coat_candidates(prep, est)
             if c.coat_level and candidates:   # a glossy layer's reflection is seen: its level too
-                est, chosen, level = self._remove_level(prep, fits, est, chosen)
+                prep, est, chosen, level = self._remove_level(prep, fits, est, chosen)
                 if level.any():   # the candidates again, on the colours less the level, under the new light
-                    prep, candidates = replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - level)), None
+                    candidates = None
             est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
             if applied is not None:
                 weight = applied.weight
@@ -169,27 +176,25 @@ class RetinexSegmented(Method):
         return Solution(est, chosen, applied, fits, level)
 
     def _remove_level(self, prep, fits: ReflectionFits, est: Estimate,
-                      chosen: Hypothesis) -> tuple[Estimate, Hypothesis, np.ndarray]:
+                      chosen: Hypothesis) -> tuple[Prepared, Estimate, Hypothesis, np.ndarray]:
         """The coat's view-independent level (:func:`.level.coat_level`) under the first fit;
         where the edges' criterion keeps it, subtracted from every colour and steps 1-5 run
-        again (the sun found the first time reused). Returns the estimate, its hypothesis and
-        the (3,) level (0: none kept, or the refit took its light from the coat's map, whose fit
-        still holds the level; the first fit unchanged)."""
+        again (the sun found the first time reused). Returns the problem on the colours less the
+        level, the estimate, its hypothesis and the (3,) level (0: none kept, or the refit took
+        its light from the coat's map, whose fit still holds the level; the first fit and
+        ``prep`` unchanged)."""
         c = self.config
-        fit = dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
-                   max_edges=c.retinex_max_edges)
         found = coat_level(chosen, prep.edges, prep.c_matrix[:, 0] > 0, fits.transfer if c.interreflection else None,
-                           fit, c.coat_max_negative)
+                           self._edge_fit_arguments(), c.coat_max_negative)
         self.log(f"coat's level: {np.round(found.level, 6).tolist()} (edges' cost lower by {found.gain:.1f}, "
                  f"price {found.price:.1f})")
         if not found.level.any():
-            return est, chosen, found.level
-        sun_found = chosen.found and replace(chosen.found, evaluations=0)   # the first fit's sun, not searched again
-        refit, hypothesis = self._fit(replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - found.level)), fits,
-                                      sun_found)
+            return prep, est, chosen, found.level
+        less = replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - found.level))
+        refit, hypothesis = self._fit(less, fits, first_sun(chosen))
         if LightSource(refit.info["light_from"]).models_the_coat:
-            return est, chosen, np.zeros(3)
-        return refit, hypothesis, found.level
+            return prep, est, chosen, np.zeros(3)
+        return less, refit, hypothesis, found.level
 
     def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis, t: float,
                       keep_regions: bool = True, candidates: list[tuple[CoatReflection, np.ndarray]] | None = None
@@ -212,7 +217,7 @@ class RetinexSegmented(Method):
         est.info["coat_costs"] = None
         if not candidates:
             return est, chosen, None
-        found = chosen.found and replace(chosen.found, evaluations=0)   # the first fit's sun, not searched again
+        found = first_sun(chosen)
         regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
         fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions)
                   for _, reflection in candidates]
@@ -271,6 +276,13 @@ class RetinexSegmented(Method):
         shape = CoatReflection(light, np.ones((groups, 3)), sh.order_of(light.shape[0]), coat.LOBE_EXPONENTS[best])
         return shape, rows[best]
 
+    def _edge_fit_arguments(self) -> dict[str, Any]:
+        """The edge fit's keyword arguments (:func:`estimator.light.edge_fit.log_shading_fit`)
+        from the settings, without the indirect shading."""
+        c = self.config
+        return dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
+                    max_edges=c.retinex_max_edges)
+
     def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None,
              labels: np.ndarray | None = None) -> tuple[Estimate, Hypothesis]:
         """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
@@ -286,8 +298,7 @@ class RetinexSegmented(Method):
         if not usable.any():
             raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
         ctx = FitContext(prep, c, self.model, self.loss, fits, prep.edges, usable,
-                         dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
-                              max_edges=c.retinex_max_edges))
+                         self._edge_fit_arguments())
         if c.interreflection:
             if fits.transfer is None:
                 fits.transfer = indirect.indirect_transfer(prep.caster, prep.sampling, prep.visibility)
