@@ -188,6 +188,8 @@ class RayCaster:
         each of ``pixels`` (P,) (row-major indices) hits, -1 on a miss
         (:meth:`Camera.subpixel_directions`; not kept)."""
         s = int(samples)
+        if len(pixels) == 0:   # Dr.Jit aborts the process on a launch of no rays
+            return np.zeros((0, s * s), dtype=np.int64)
         directions = camera.subpixel_directions(pixels, s)
         return self._first_hits(self._camera_rays([camera], [directions.shape[1]], directions)).reshape(-1, s * s)
 

@@ -6,6 +6,7 @@ from estimator import estimate
 from estimator.config import EstimatorConfig
 from estimator.core.camera import Camera, look_at
 from estimator.core.data import MultiViewData, TriangleMesh, View
+from estimator.core.errors import InputError
 from estimator.pipeline.observations import Observations, gather_observations
 from estimator.rays.raycast import RayCaster
 
@@ -147,6 +148,23 @@ def test_an_estimate_counts_the_faces_observed_through_pixel_centres():
     est = estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50))
     assert est.info["unresolved_faces"] >= (hit & ~covered).sum() > 0
     assert np.all(est.observed[hit])
+
+
+@pytest.mark.parametrize("broken", ["transparent", "negative"])
+def test_a_view_without_a_usable_pixel_is_named_not_fatal(broken):
+    """One view fully transparent (alpha 0) or all negative beside usable ones: an InputError
+    that names it, not a process aborted by Dr.Jit (a launch of no sub-pixel rays for its
+    pixels). No pixel at all asks for no sub-pixel ray."""
+    mesh = sphere(1)
+    caster = RayCaster(mesh)
+    cams = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 24, 24) for eye in ([0, 0, 4], [0, 4, 0.1], [4, 0, 0])]
+    assert caster.subpixel_faces(cams[0], 4, np.zeros(0, dtype=np.int64)).shape == (0, 16)
+    rgb = np.full((24, 24, 3), 0.5)
+    views = [View("bad", cams[0], -rgb if broken == "negative" else rgb,
+                  alpha=np.full((24, 24), 1.0 if broken == "negative" else 0.0))]
+    views += [View(f"v{i}", cam, rgb, alpha=np.ones((24, 24))) for i, cam in enumerate(cams[1:])]
+    with pytest.raises(InputError, match="bad"):
+        estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 
 def test_a_face_id_buffer_is_the_first_hit_of_each_pixel_ray():
