@@ -82,6 +82,22 @@ def novel_views(predictor: Predictor, views: list[View], note: str = "",
     return images, unestimated, estimated
 
 
+def cross_check_images(names: list[str], renders: list[np.ndarray], predictions: list[np.ndarray],
+                       masks: list[np.ndarray], noise: list[float] | None) -> ImageSet:
+    """The Mitsuba cross-check's image set: each view's render (H, W, 3) against the forward
+    model's prediction on its ``masks`` (H, W) (pixels covered by one face alone), with the
+    renders' relative ``noise`` per view (None: one render). A view with no such pixel (faces
+    about a pixel or smaller) has nothing to compare: it is left out and the note counts it;
+    with none left the set has no view and the report keeps the note alone."""
+    kept = [k for k, m in enumerate(masks) if m.any()]
+    note = "Mitsuba path tracer (2 bounces) vs the estimator's forward model, on pixels covered by one face alone"
+    if len(kept) < len(masks):
+        note += f"; {len(masks) - len(kept)} view(s) without such a pixel left out"
+    return ImageSet([names[k] for k in kept], [renders[k] for k in kept], [predictions[k] for k in kept],
+                    [masks[k] for k in kept], align=False, noise=None if noise is None else [noise[k] for k in kept],
+                    note=note)
+
+
 def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], renders: Renders,
              header: dict, view_note: str = "", protocols: tuple[str, ...] = ()) -> ReportContent:
     """Compare an estimate (through its ``predictor``) with the ground truth.
@@ -116,9 +132,7 @@ def assemble(predictor: Predictor, truth: GroundTruth, views: list[View], render
             # the mean of two renders deviates from its expectation by |A - B| / 2 (same variance each)
             noise = [float(0.5 * np.linalg.norm((a - b)[m]) / max(np.linalg.norm(p[m]), 1e-300))
                      for a, b, p, m in zip(halves, twins, preds, masks)]
-        cross = ImageSet(names, renders_rgb, preds, masks, align=False, noise=noise,
-                         note="Mitsuba path tracer (2 bounces) vs the estimator's forward model, "
-                              "on pixels covered by one face alone")
+        cross = cross_check_images(names, renders_rgb, preds, masks, noise)
     elif renders.estimate_note:
         cross = ImageSet([], [], [], [], note=renders.estimate_note)
 
