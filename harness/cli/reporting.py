@@ -21,6 +21,7 @@ from reports.protocols import PROTOCOLS
 from reports.regression import check
 from reports.report import (
     COMPARE_COLUMNS,
+    IDENTITY_COLUMNS,
     Renders,
     assemble,
     compare_figures,
@@ -178,9 +179,16 @@ def find_metrics(folder: str) -> str:
     raise RunError(f"{folder} has no metrics.json (nor report/metrics.json): run `pseudolight report` first")
 
 
+# the numbers a comparison reads from each report: its columns and its error against time
+COMPARED_NUMBERS = tuple(key for _, key in COMPARE_COLUMNS[len(IDENTITY_COLUMNS):]) + (
+    "albedo.diffuse.psnr_lstsq", "estimate_timings.total")
+
+
 def check_metrics_format(metrics, path: str) -> dict:
     """``metrics`` as read from ``path``, refused (:class:`RunError`) when it is not a report's
-    metrics table or was written by a newer pseudolight (another schema version)."""
+    metrics table or was written by a newer pseudolight (another schema version): it must name
+    its method (and its scene, or null), and every number a comparison reads
+    (:data:`COMPARED_NUMBERS`) must be a number or null where present."""
     from reports.evaluate import SCHEMA, SCHEMA_VERSION
 
     if not isinstance(metrics, dict):
@@ -190,6 +198,22 @@ def check_metrics_format(metrics, path: str) -> dict:
     version = metrics.get("schema_version", SCHEMA_VERSION)
     if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= SCHEMA_VERSION:
         raise RunError(f"{path}: schema_version {version!r} is not one this pseudolight reads (1 to {SCHEMA_VERSION})")
+    if not isinstance(metrics.get("method"), str):
+        raise RunError(f"{path}: 'method' must name the method (a string), got {metrics.get('method')!r}")
+    if not isinstance(metrics.get("scene"), (str, type(None))):
+        raise RunError(f"{path}: 'scene' must be a string or null, got {metrics['scene']!r}")
+    for dotted in COMPARED_NUMBERS:
+        node = metrics
+        for depth, key in enumerate(dotted.split(".")):
+            if node is None or key not in node:
+                break   # a section the report has not (a run without relighting): shown as '-'
+            node = node[key]
+            inner = depth < dotted.count(".")
+            if inner and not isinstance(node, (dict, type(None))):
+                raise RunError(f"{path}: '{'.'.join(dotted.split('.')[:depth + 1])}' must be an object or null, "
+                               f"got {node!r}")
+            if not inner and (isinstance(node, bool) or not isinstance(node, (int, float, type(None)))):
+                raise RunError(f"{path}: '{dotted}' must be a number or null, got {node!r}")
     return metrics
 
 

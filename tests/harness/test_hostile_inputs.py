@@ -278,10 +278,14 @@ def test_malformed_baseline_metrics_and_run_json(copy, tmp_path, capsys):
     bad.write_text("{not json")
     expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba", "--baseline", bad], str(bad), "not valid JSON",
                  inputs=[run, ds, bad], absent=[out])
+    good = json.loads((rep / "metrics.json").read_text())
     (rep / "metrics.json").write_text("[1, 2")
     expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", "not valid JSON", inputs=[rep], absent=[out])
+    wrong = [{**good, "scene": [1]}, {**good, "albedo": "x"}, {**good, "novel_views": 5},
+             {**good, "novel_views": {**(good["novel_views"] or {}), "psnr_srgb": "x"}}]
     for text, needle in (("[1, 2]", "JSON object"), ('{"schema_version": 99}', "schema_version 99"),
-                         ('{"schema": "other"}', "schema 'other'")):
+                         ('{"schema": "other"}', "schema 'other'"), ("{}", "'method'"),
+                         *zip(map(json.dumps, wrong), ("'scene'", "'albedo'", "'novel_views'", "novel_views.psnr_srgb"))):
         (rep / "metrics.json").write_text(text)
         expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", needle, inputs=[rep], absent=[out])
     (run / "run.json").write_text("NaN")
