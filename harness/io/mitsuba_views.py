@@ -24,7 +24,7 @@ import numpy as np
 
 from estimator import InputError, mitsuba_sensor
 from harness.io.dataset import Dataset
-from harness.io.exr import write_exr
+from harness.io.exr import read_exr, write_exr
 from harness.io.jsonio import load_json
 from harness.io.mesh import write_uv_ply
 from harness.scene.illumination import Illumination
@@ -68,6 +68,10 @@ def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> di
         source = os.path.join(ds.path, "ground_truth", record["illumination"].get("envmap_file", "envmap.exr"))
         if not os.path.isfile(source):
             raise InputError(f"{source} is missing: the envmap light cannot be exported")
+        radiance = read_exr(source)   # read, not only copied: a truncated map must not pass into the export
+        if not np.all(np.isfinite(radiance)) or np.any(radiance[..., :3] < 0):
+            raise InputError(f"{source}: the envmap holds NaN, Inf or negative radiance; Mitsuba's envmap needs "
+                             f"finite radiance >= 0")
         shutil.copyfile(source, os.path.join(out_dir, "envmap.exr"))
     image, uv = face_atlas(np.asarray(truth.diffuse, np.float32))
     write_exr(os.path.join(out_dir, "albedo.exr"), image)

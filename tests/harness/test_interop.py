@@ -218,6 +218,21 @@ def test_estimate_export_imports_back(stock_export, tmp_path):
     np.testing.assert_allclose(arrays["specular"], est.specular, rtol=1e-6)
 
 
+def test_mitsuba_export_reads_the_envmap_it_copies(stock_export, tmp_path, capsys):
+    """A truncated ground-truth envmap is named, not copied into an export that Mitsuba cannot
+    load; nothing is left behind."""
+    import shutil
+
+    folder, _ = stock_export
+    broken = tmp_path / "rl"
+    shutil.copytree(folder, broken)
+    envmap = broken / "ground_truth" / "envmap.exr"
+    envmap.write_bytes(envmap.read_bytes()[:3000])
+    assert main(["export", str(broken), "--format", "mitsuba", "-o", str(tmp_path / "m")]) == 2
+    assert "envmap.exr" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
+
+
 def test_mitsuba_export_refuses_a_phong_dataset(tiny_earth, tmp_path, capsys):
     assert main(["export", tiny_earth, "--format", "mitsuba", "-o", str(tmp_path / "m")]) == 2
     assert "stock Mitsuba 3 has no such BSDF" in capsys.readouterr().err
