@@ -186,6 +186,9 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
             raise DatasetError(f"{where}: intrinsic '{key}' must be a positive integer, got {values[key]:g}")
     raw = frame.get("transform_matrix")
     try:
+        # numbers only: NumPy would read the text "1" as 1.0 where the intrinsics refuse it
+        if not all(type(v) in (int, float) for row in raw for v in row):
+            raise TypeError
         matrix = np.asarray(raw, dtype=np.float64)
     except (TypeError, ValueError):
         raise DatasetError(f"{where}: transform_matrix must be a 4x4 array of numbers, got {str(raw)[:60]!r}") from None

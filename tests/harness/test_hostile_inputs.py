@@ -235,6 +235,8 @@ def test_malformed_transforms_json(copy, tmp_path, capsys):
         ({**t, "format_version": 99}, ["format_version 99"]),
         ({**t, "frames": [{**t["frames"][0], "transform_matrix": "eye(4)"}]}, ["frames[0]", "4x4 array of numbers"]),
         ({**t, "frames": [{**t["frames"][0], "transform_matrix": [[float("nan")] * 4] * 4}]}, ["frames[0]", "NaN"]),
+        ({**t, "frames": [{**t["frames"][0], "transform_matrix": [[str(v) for v in row] for row in np.eye(4)]}]},
+         ["frames[0]", "4x4 array of numbers"]),
         ({**t, "frames": [{**t["frames"][0], "transform_matrix": np.diag([1, 1, 0, 1.0]).tolist()}]},
          ["frames[0]", "not a rigid"]),
         ({**t, "fl_x": "wide"}, ["fl_x", "finite number"]),

@@ -98,6 +98,32 @@ def test_uv_textures_from_a_mesh_file(tmp_path):
         parse_spec(raw, str(tmp_path))
 
 
+@pytest.mark.parametrize("broken, needle", [("face", "face indices"), ("vertex", "NaN or Inf")])
+def test_a_spec_mesh_that_fails_its_checks_is_named(tmp_path, broken, needle):
+    """A mesh file a spec names, whose faces index no vertex or whose vertices are not finite:
+    the error names the file, not only what is wrong."""
+    import numpy as np
+
+    from estimator import InputError
+    from harness.scene.generate import prepare
+
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    faces = np.array([[0, 1, 2]])
+    if broken == "face":
+        faces = np.array([[0, 1, 7]])
+    else:
+        vertices[1, 0] = np.nan
+    path = tmp_path / "bad.ply"
+    body = "".join(f"{x} {y} {z}\n" for x, y, z in vertices) + "".join(f"3 {a} {b} {c}\n" for a, b, c in faces)
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 1\nproperty list uchar int vertex_indices\nend_header\n" + body)
+    raw = {"name": "m", "geometry": {"type": "mesh", "file": "bad.ply"},
+           "illumination": {"type": "directional", "lights": [{"to_light": [0, 0, 1]}]}}
+    with pytest.raises(InputError, match=needle) as caught:
+        prepare(parse_spec(raw, str(tmp_path)))
+    assert str(path) in str(caught.value)
+
+
 def test_overrides_naming_an_unknown_top_level_key_are_refused(tmp_path):
     raw = _base(tmp_path)
     with pytest.raises(SpecError, match="spec.bogus"):
