@@ -33,6 +33,8 @@ def load_mesh_with_uv(path: str | os.PathLike) -> tuple[TriangleMesh, np.ndarray
         raise InputError(f"mesh file {path} has no faces")
     uv = getattr(getattr(loaded, "visual", None), "uv", None)
     uv = None if uv is None or len(uv) != len(loaded.vertices) else np.asarray(uv, dtype=np.float64)
+    if uv is not None and not np.all(np.isfinite(uv)):
+        raise InputError(f"mesh file {path}: its texture coordinates hold NaN or Inf")
     return TriangleMesh(np.asarray(loaded.vertices), faces), uv
 
 

@@ -174,6 +174,9 @@ def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check pe
             data[key] = real_array(f"{npz}: {key}", data[key], RunError)
             if not np.all(np.isfinite(data[key])):
                 raise RunError(f"{npz}: {key} contains NaN or Inf")
+            if np.any(np.abs(data[key]) > np.finfo(np.float32).max):   # images and textures hold float32
+                raise RunError(f"{npz}: {key} exceeds the float32 range of the images and textures made from it "
+                               f"(largest magnitude {np.abs(data[key]).max():.3g})")
     f = data["diffuse"].shape[0] if data["diffuse"].ndim == 2 else -1
     if f < 1 or data["diffuse"].shape != (f, 3) or data["specular"].shape != (f, 3) or data["labels"].shape != (f,) \
             or data["observed"].shape != (f,):

@@ -118,6 +118,11 @@ def test_non_finite_estimate_is_refused_and_nan_is_a_regression(copy, capsys):
     out = run.parent / "rep2"
     expect_error(capsys, ["report", run, "-o", out, "--no-mitsuba"], "estimate.npz", "pseudo_sh", "NaN",
                  inputs=[run, ds], absent=[out])
+    data["pseudo_sh"][3, 1] = 0.0
+    data["diffuse"] = data["diffuse"] * 1e300    # finite, beyond float32: the textures would hold Inf
+    np.savez(run / "estimate.npz", **data)
+    expect_error(capsys, ["export-texture", run, "-o", out, "--size", "64"], "estimate.npz", "diffuse", "float32",
+                 inputs=[run, ds], absent=[out])
 
     from reports.regression import check
 
@@ -912,6 +917,18 @@ def test_a_binary_obj_is_a_one_line_error(tmp_path):
     path.write_bytes(np.random.default_rng(0).integers(0, 256, 3000, dtype=np.uint8).tobytes())
     with pytest.raises(InputError, match=r"cannot read mesh file .*mesh\.obj"):
         load_mesh_file(path)
+
+
+def test_a_mesh_whose_texture_coordinates_are_not_finite_is_named(tmp_path):
+    """An OBJ with a NaN ``vt``: one error naming the mesh, not NumPy's warnings and then an
+    error blaming the texture sampled through those coordinates."""
+    from estimator import InputError
+    from harness.io.mesh import load_mesh_with_uv
+
+    path = tmp_path / "quad.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt nan 0\nvt 0 1\nf 1/1 2/2 3/3\n")
+    with pytest.raises(InputError, match=r"quad\.obj: its texture coordinates hold NaN"):
+        load_mesh_with_uv(path)
 
 
 # ---------------------------------------------------------------- issue 25/27 session, hostile-input run
