@@ -152,6 +152,8 @@ def read_run(folder: str) -> tuple[Estimate, dict]:  # noqa: C901  (one check pe
         if not os.path.isfile(path):
             raise RunError(f"{folder} is not a run folder: {os.path.basename(path)} missing")
     run = load_json(js, "run", RunError)
+    if run.get("format", RUN_FORMAT) != RUN_FORMAT:
+        raise RunError(f"{js}: format {run['format']!r} is not {RUN_FORMAT!r}: not a pseudolight run")
     version = run.get("format_version", 1)
     if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= RUN_FORMAT_VERSION:
         raise RunError(

@@ -919,6 +919,20 @@ def test_a_binary_obj_is_a_one_line_error(tmp_path):
         load_mesh_file(path)
 
 
+def test_a_flag_another_import_source_takes_and_a_foreign_run_format_are_refused(copy, tmp_path, capsys):
+    """``--file`` beside ``--from uv-textures`` (or ``--mesh`` beside ``--from per-face``) would be
+    ignored: refused naming the flag; a run.json whose ``format`` is another is not a run."""
+    ds, run, _ = copy
+    out = tmp_path / "imp"
+    expect_error(capsys, ["import", ds, "--from", "uv-textures", "--mesh", ds / "mesh.ply", "--diffuse", "d.exr",
+                          "--file", run / "estimate.npz", "-o", out], "--file", "uv-textures", inputs=[ds], absent=[out])
+    expect_error(capsys, ["import", ds, "--from", "per-face", "--file", run / "estimate.npz", "--mesh",
+                          ds / "mesh.ply", "-o", out], "--mesh", "per-face", inputs=[ds], absent=[out])
+    record = json.loads((run / "run.json").read_text())
+    (run / "run.json").write_text(json.dumps({**record, "format": "nope"}))
+    expect_error(capsys, ["render", run, "-o", out], "run.json", "'nope'", inputs=[run, ds], absent=[out])
+
+
 def test_a_mesh_whose_texture_coordinates_are_not_finite_is_named(tmp_path):
     """An OBJ with a NaN ``vt``: one error naming the mesh, not NumPy's warnings and then an
     error blaming the texture sampled through those coordinates."""
