@@ -491,11 +491,12 @@ def test_files_read_from_outside_the_dataset_are_inputs_too(copy, tmp_path, caps
 
 
 def test_rendering_a_run_whose_light_is_beyond_any_image_names_the_run(copy, tmp_path, capsys):
-    """A light so bright that its predicted pixels overflow an EXR's float32: the run's estimate
-    is named as the cause, not the output folder, and nothing is written."""
+    """A light and albedos each within float32 whose predicted pixels overflow an EXR's float32:
+    the run's estimate is named as the cause, not the output folder, and nothing is written."""
     ds, run, _ = copy
     data = dict(np.load(run / "estimate.npz"))
-    data["pseudo_sh"] = data["pseudo_sh"] * 1e300
+    data["pseudo_sh"] = data["pseudo_sh"] * 1e30
+    data["diffuse"] = data["diffuse"] * 1e15
     np.savez(run / "estimate.npz", **data)
     out = tmp_path / "predicted"
     line = expect_error(capsys, ["render", run, "-o", out], str(run), "estimate.npz", "beyond any image's range",
