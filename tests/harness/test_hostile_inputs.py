@@ -292,7 +292,8 @@ def test_malformed_baseline_metrics_and_run_json(copy, tmp_path, capsys):
              {**good, "novel_views": {**(good["novel_views"] or {}), "psnr_srgb": "x"}}]
     for text, needle in (("[1, 2]", "JSON object"), ('{"schema_version": 99}', "schema_version 99"),
                          ('{"schema": "other"}', "schema 'other'"), ("{}", "'method'"),
-                         *zip(map(json.dumps, wrong), ("'scene'", "'albedo'", "'novel_views'", "novel_views.psnr_srgb"))):
+                         *zip(map(json.dumps, wrong),
+                              ("'scene'", "'albedo'", "'novel_views'", "novel_views.psnr_srgb"))):
         (rep / "metrics.json").write_text(text)
         expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", needle, inputs=[rep], absent=[out])
     (run / "run.json").write_text("NaN")
@@ -926,7 +927,8 @@ def test_a_flag_another_import_source_takes_and_a_foreign_run_format_are_refused
     ds, run, _ = copy
     out = tmp_path / "imp"
     expect_error(capsys, ["import", ds, "--from", "uv-textures", "--mesh", ds / "mesh.ply", "--diffuse", "d.exr",
-                          "--file", run / "estimate.npz", "-o", out], "--file", "uv-textures", inputs=[ds], absent=[out])
+                          "--file", run / "estimate.npz", "-o", out], "--file", "uv-textures",
+                 inputs=[ds], absent=[out])
     expect_error(capsys, ["import", ds, "--from", "per-face", "--file", run / "estimate.npz", "--mesh",
                           ds / "mesh.ply", "-o", out], "--mesh", "per-face", inputs=[ds], absent=[out])
     record = json.loads((run / "run.json").read_text())
