@@ -16,6 +16,7 @@ from .methods.base import REGISTRY
 from .model.estimate import Estimate
 from .model.reflection_models import reflection_model
 from .pipeline import exposure, pose
+from .pipeline.observations import check_transparent
 from .pipeline.prepared import Prepared, prepare, with_config
 from .rays.raycast import RayCaster
 
@@ -54,6 +55,7 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     # one for the pose check, the refinement and the solve: each view's
     # face-ID buffers are traced once per camera
     caster = caster or RayCaster(data.mesh, config.variant)
+    check_transparent(data.views, config.min_coverage)   # before the pose check and refinement trace them
     if rounds == 0 and config.auto_pose > 0 and len(data.views) >= 2:
         offsets = pose.outline_offsets(data, caster)
         if np.nanmax(offsets, initial=0.0) > config.auto_pose:

@@ -194,6 +194,17 @@ def _unmixed_rows(caster: RayCaster, views: list[View], usable: list[np.ndarray]
     return face[keep], view[keep], rgb[keep], share[keep]
 
 
+def check_transparent(views: list[View], min_alpha: float) -> None:
+    """Refuse (:class:`InputError`, naming them) views whose alpha is below ``min_alpha``
+    everywhere: they show no pixel to estimate from. Checked before anything is traced (the
+    pose refinement's estimates too)."""
+    clear = [view.name for view in views if view.alpha is not None and not np.any(view.alpha >= min_alpha)]
+    if clear:
+        raise InputError(f"{len(clear)} view(s) are fully transparent (alpha below {min_alpha} everywhere): "
+                         f"{', '.join(clear[:5])}{' ...' if len(clear) > 5 else ''}; check their alpha channel "
+                         "or drop them from the dataset")
+
+
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = ObservationConfig.min_pixels,
                         min_alpha: float = ObservationConfig.min_coverage,
                         pure_pixels: bool = ObservationConfig.pure_pixels,
@@ -219,6 +230,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     ``-negative_tolerance`` x the view's 99th-percentile object value are not light
     (noise never goes that far below zero): they are dropped and counted per view.
     """
+    check_transparent(views, min_alpha)
     mesh: TriangleMesh = caster.mesh
     f = mesh.num_faces
     cameras = [v.camera for v in views]
@@ -268,11 +280,6 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         to_cam = view.camera.center[None] - mesh.centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         parts.append((faces, means, to_cam, np.full(len(faces), index)))
-    clear = [view.name for view in views if view.alpha is not None and not np.any(view.alpha >= min_alpha)]
-    if clear:
-        raise InputError(f"{len(clear)} view(s) are fully transparent (alpha below {min_alpha} everywhere): "
-                         f"{', '.join(clear[:5])}{' ...' if len(clear) > 5 else ''}; check their alpha channel "
-                         "or drop them from the dataset")
     dark = [view.name for view, valid, seen in zip(views, usable, on_mesh) if seen and not valid.any()]
     if dark:
         raise InputError(f"{len(dark)} view(s) show the mesh but every pixel on it has a channel below zero: "

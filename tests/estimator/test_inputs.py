@@ -167,6 +167,23 @@ def test_a_view_without_a_usable_pixel_is_named_not_fatal(broken):
         estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 
+def test_a_transparent_view_is_refused_before_the_poses_are_refined(monkeypatch):
+    """The pose refinement's held-out estimates would trace and solve every view first: a view
+    whose alpha is 0 everywhere is named before any of that."""
+    from estimator.pipeline import pose
+
+    def refine(*args, **kwargs):
+        raise AssertionError("the poses were refined before the transparent view was named")
+
+    monkeypatch.setattr(pose, "refine_poses", refine)
+    mesh = sphere(1)
+    cams = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 24, 24) for eye in ([0, 0, 4], [0, 4, 0.1], [4, 0, 0])]
+    views = [View(f"v{i}", cam, np.full((24, 24, 3), 0.5), alpha=np.full((24, 24), float(i > 0)))
+             for i, cam in enumerate(cams)]
+    with pytest.raises(InputError, match="fully transparent.*v0"):
+        estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50, pose_rounds=2))
+
+
 def test_a_face_id_buffer_is_the_first_hit_of_each_pixel_ray():
     """The buffers' rays, made per axis for a batch of cameras, are the cameras' own pixel rays."""
     mesh = sphere(2)
