@@ -573,7 +573,7 @@ def cmd_import(args) -> int:
     stray = [flag for flag, sources in applies.items()
              if getattr(args, flag[2:]) is not None and args.source not in sources]
     if stray:
-        raise InputError(f"{', '.join(stray)} does not apply to --from {args.source}")
+        raise InputError(f"{', '.join(stray)} {'does' if len(stray) == 1 else 'do'} not apply to --from {args.source}")
     files = [p for p in (args.file, args.mesh, args.diffuse, args.specular, args.envmap) if p]
     if args.source == "mitsuba-xml" and args.file:   # the mesh, textures and envmap the XML names are inputs too
         files += xml_referenced_files(args.file)

@@ -180,15 +180,17 @@ def find_metrics(folder: str) -> str:
 
 
 # the numbers a comparison reads from each report: its columns and its error against time
-COMPARED_NUMBERS = tuple(key for _, key in COMPARE_COLUMNS[len(IDENTITY_COLUMNS):]) + (
-    "albedo.diffuse.psnr_lstsq", "estimate_timings.total")
+# (the median error column comes from ratios.npz, not from the metrics)
+COMPARED_NUMBERS = tuple(key for _, key in COMPARE_COLUMNS[len(IDENTITY_COLUMNS):]
+                         if key != "diffuse_median_abs_error") + ("albedo.diffuse.psnr_lstsq", "estimate_timings.total")
 
 
 def check_metrics_format(metrics, path: str) -> dict:
     """``metrics`` as read from ``path``, refused (:class:`RunError`) when it is not a report's
     metrics table or was written by a newer pseudolight (another schema version): it must name
-    its method (and its scene, or null), and every number a comparison reads
-    (:data:`COMPARED_NUMBERS`) must be a number or null where present."""
+    its method, its scene must be a scalar (the dataset's name for it) or null, the objects a
+    comparison reads objects, and every number it reads (:data:`COMPARED_NUMBERS`, the PSNR
+    history) a number or null where present."""
     from reports.evaluate import SCHEMA, SCHEMA_VERSION
 
     if not isinstance(metrics, dict):
@@ -200,8 +202,19 @@ def check_metrics_format(metrics, path: str) -> dict:
         raise RunError(f"{path}: schema_version {version!r} is not one this pseudolight reads (1 to {SCHEMA_VERSION})")
     if not isinstance(metrics.get("method"), str):
         raise RunError(f"{path}: 'method' must name the method (a string), got {metrics.get('method')!r}")
-    if not isinstance(metrics.get("scene"), (str, type(None))):
-        raise RunError(f"{path}: 'scene' must be a string or null, got {metrics['scene']!r}")
+    if isinstance(metrics.get("scene"), (list, dict)):   # a dataset's scene name is whatever JSON scalar it holds
+        raise RunError(f"{path}: 'scene' must be a name (a string, a number or null), got {metrics['scene']!r}")
+    for key in ("parameters", "estimate_timings"):
+        if not isinstance(metrics.get(key), (dict, type(None))):
+            raise RunError(f"{path}: '{key}' must be an object or null, got {str(metrics[key])[:60]!r}")
+    history = (metrics.get("albedo") or {}).get("diffuse") if isinstance(metrics.get("albedo"), dict) else None
+    history = history.get("psnr_history") if isinstance(history, dict) else None
+    if history is not None and not (isinstance(history, dict) and all(
+            isinstance(history.get(k, []), list) and all(v is None or (type(v) in (int, float))
+                                                       for v in history.get(k, []))
+            for k in ("seconds", "psnr_lstsq"))):
+        raise RunError(f"{path}: 'albedo.diffuse.psnr_history' must hold lists of numbers under 'seconds' and "
+                       f"'psnr_lstsq', got {str(history)[:60]!r}")
     for dotted in COMPARED_NUMBERS:
         node = metrics
         for depth, key in enumerate(dotted.split(".")):

@@ -190,7 +190,7 @@ def _intrinsics(where: str, frame: dict, top: dict) -> Camera:
         if not all(type(v) in (int, float) for row in raw for v in row):
             raise TypeError
         matrix = np.asarray(raw, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise DatasetError(f"{where}: transform_matrix must be a 4x4 array of numbers, got {str(raw)[:60]!r}") from None
     if matrix.shape != (4, 4):
         raise DatasetError(f"{where}: transform_matrix must be a 4x4 array of numbers, got shape {matrix.shape}")
@@ -371,7 +371,7 @@ def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: 
         if declared and "has no faces" in str(exc):   # trimesh drops faces it cannot read as triangles
             raise DatasetError(f"{mesh_path}: holds {declared} faces but no triangle; a dataset's mesh must be "
                                "triangles (each face's index is its identity): triangulate it first") from None
-        raise DatasetError(f"{mesh_path}: {exc}") from None
+        raise DatasetError(str(exc)) from None   # the mesh reader names the file
     if declared is not None and declared != mesh.num_faces:
         raise DatasetError(f"{mesh_path}: declares {declared} faces, which load as {mesh.num_faces} triangles: a "
                            "dataset's mesh must be triangles (each face's index is its identity, and splitting "

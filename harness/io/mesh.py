@@ -35,7 +35,10 @@ def load_mesh_with_uv(path: str | os.PathLike) -> tuple[TriangleMesh, np.ndarray
     uv = None if uv is None or len(uv) != len(loaded.vertices) else np.asarray(uv, dtype=np.float64)
     if uv is not None and not np.all(np.isfinite(uv)):
         raise InputError(f"mesh file {path}: its texture coordinates hold NaN or Inf")
-    return TriangleMesh(np.asarray(loaded.vertices), faces), uv
+    try:
+        return TriangleMesh(np.asarray(loaded.vertices), faces), uv
+    except InputError as exc:   # the mesh's own checks (indices, finite vertices) do not know its file
+        raise InputError(f"mesh file {path}: {exc}") from None
 
 
 def polygon_count(path: str | os.PathLike) -> int | None:

@@ -68,10 +68,10 @@ def write_mitsuba_views(ds: Dataset, out_dir: str, spp: int | None = None) -> di
         source = os.path.join(ds.path, "ground_truth", record["illumination"].get("envmap_file", "envmap.exr"))
         if not os.path.isfile(source):
             raise InputError(f"{source} is missing: the envmap light cannot be exported")
-        radiance = read_exr(source)   # read, not only copied: a truncated map must not pass into the export
-        if not np.all(np.isfinite(radiance)) or np.any(radiance[..., :3] < 0):
-            raise InputError(f"{source}: the envmap holds NaN, Inf or negative radiance; Mitsuba's envmap needs "
-                             f"finite radiance >= 0")
+        # read, not only copied: a truncated map must not pass into the export (copied as it is
+        # otherwise: the dataset was rendered with it)
+        if not np.all(np.isfinite(read_exr(source)[..., :3])):
+            raise InputError(f"{source}: the envmap holds NaN or Inf radiance")
         shutil.copyfile(source, os.path.join(out_dir, "envmap.exr"))
     image, uv = face_atlas(np.asarray(truth.diffuse, np.float32))
     write_exr(os.path.join(out_dir, "albedo.exr"), image)

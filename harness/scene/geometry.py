@@ -12,7 +12,7 @@ from typing import Callable
 import numpy as np
 import trimesh
 
-from estimator import InputError, TriangleMesh
+from estimator import TriangleMesh
 from harness.io.mesh import load_mesh_with_uv
 
 Builder = Callable[..., "tuple[TriangleMesh, np.ndarray | None]"]
@@ -95,8 +95,4 @@ def _bumpy_kind(spec, seed: int):
 
 @geometry_kind("mesh")
 def _mesh_kind(spec, seed: int):
-    try:
-        return load_mesh_with_uv(spec.file)
-    except InputError as exc:   # the mesh's own checks (indices, finite vertices) do not know its file
-        message = str(exc)
-        raise InputError(message if str(spec.file) in message else f"{spec.file}: {message}") from None
+    return load_mesh_with_uv(spec.file)

@@ -210,7 +210,7 @@ def test_a_refit_offers_the_first_fits_regions_and_the_glossy_micro_scene_gains(
     albedos nearer the truth. How much depends on the rounding: the segmentation of this small,
     noisy scene (two true regions) finds 5 uniform regions with two BLAS threads and 4 with one,
     and the gain measured is 17.7 -> 20.9 dB with two, 18.4 -> 18.9 dB with one. So the test
-    asks for a gain, not its size, and holds for either thread count."""
+    asks for the gain of the worse of the two, 0.3 dB, and holds for either thread count."""
     from dataclasses import replace
 
     from estimator.methods.retinex_segmented.method import RetinexSegmented
@@ -227,7 +227,7 @@ def test_a_refit_offers_the_first_fits_regions_and_the_glossy_micro_scene_gains(
         if correct:
             offered = [h["light_from"] for h in est.info["hypotheses"]]
             assert "edges and the first fit's regions" in offered and est.info["coat_degree"] is not None
-    assert psnr[True] > psnr[False]
+    assert psnr[True] > psnr[False] + 0.3
 
 
 def test_kept_regions_ties_the_given_regions_as_they_are():

@@ -242,6 +242,8 @@ def test_malformed_transforms_json(copy, tmp_path, capsys):
         ({**t, "frames": [{**t["frames"][0], "transform_matrix": [[float("nan")] * 4] * 4}]}, ["frames[0]", "NaN"]),
         ({**t, "frames": [{**t["frames"][0], "transform_matrix": [[str(v) for v in row] for row in np.eye(4)]}]},
          ["frames[0]", "4x4 array of numbers"]),
+        ({**t, "frames": [{**t["frames"][0], "transform_matrix": [[10 ** 400] * 4] * 4}]},
+         ["frames[0]", "4x4 array of numbers"]),
         ({**t, "frames": [{**t["frames"][0], "transform_matrix": np.diag([1, 1, 0, 1.0]).tolist()}]},
          ["frames[0]", "not a rigid"]),
         ({**t, "fl_x": "wide"}, ["fl_x", "finite number"]),
@@ -289,13 +291,17 @@ def test_malformed_baseline_metrics_and_run_json(copy, tmp_path, capsys):
     (rep / "metrics.json").write_text("[1, 2")
     expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", "not valid JSON", inputs=[rep], absent=[out])
     wrong = [{**good, "scene": [1]}, {**good, "albedo": "x"}, {**good, "novel_views": 5},
-             {**good, "novel_views": {**(good["novel_views"] or {}), "psnr_srgb": "x"}}]
+             {**good, "novel_views": {**(good["novel_views"] or {}), "psnr_srgb": "x"}}, {**good, "parameters": [1]},
+             {**good, "albedo": {**good["albedo"], "diffuse": {**good["albedo"]["diffuse"], "psnr_history": [1, 2]}}}]
     for text, needle in (("[1, 2]", "JSON object"), ('{"schema_version": 99}', "schema_version 99"),
                          ('{"schema": "other"}', "schema 'other'"), ("{}", "'method'"),
-                         *zip(map(json.dumps, wrong),
-                              ("'scene'", "'albedo'", "'novel_views'", "novel_views.psnr_srgb"))):
+                         *zip(map(json.dumps, wrong), ("'scene'", "'albedo'", "'novel_views'", "novel_views.psnr_srgb",
+                                                       "'parameters'", "psnr_history"))):
         (rep / "metrics.json").write_text(text)
         expect_error(capsys, ["compare", rep, "-o", out], "metrics.json", needle, inputs=[rep], absent=[out])
+    (rep / "metrics.json").write_text(json.dumps({**good, "scene": 42}))   # a dataset may name its scene so
+    assert main(["compare", str(rep), "-o", str(tmp_path / "compared")]) == 0
+    capsys.readouterr()
     (run / "run.json").write_text("NaN")
     expect_error(capsys, ["render", run, "-o", out], "run.json", inputs=[run, ds], absent=[out])
 

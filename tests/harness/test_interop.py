@@ -231,6 +231,14 @@ def test_mitsuba_export_reads_the_envmap_it_copies(stock_export, tmp_path, capsy
     assert main(["export", str(broken), "--format", "mitsuba", "-o", str(tmp_path / "m")]) == 2
     assert "envmap.exr" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()
+    import mitsuba as mi
+
+    image = np.full((8, 16, 3), 0.5, np.float32)
+    image[2, 3, 1] = np.nan
+    mi.Bitmap(image).write(str(envmap))
+    assert main(["export", str(broken), "--format", "mitsuba", "-o", str(tmp_path / "m")]) == 2
+    assert "envmap.exr: the envmap holds NaN or Inf" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
 
 
 def test_mitsuba_export_refuses_a_phong_dataset(tiny_earth, tmp_path, capsys):
