@@ -239,11 +239,17 @@ def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False,
         path = find_metrics(folder)
         metrics = check_metrics_format(load_json(path, "report metrics", RunError), path)
         ratios_path = os.path.join(os.path.dirname(path), "ratios.npz")
-        try:
-            with np.load(ratios_path, allow_pickle=False) as archive:
-                ratios = {k: archive[k] for k in archive.files}
-        except (OSError, ValueError, EOFError):
-            raise RunError(f"{ratios_path}: missing or unreadable (not a .npz archive)") from None
+        ratios = {}
+        if os.path.exists(ratios_path):   # a report without ground-truth albedos writes none
+            try:
+                with np.load(ratios_path, allow_pickle=False) as archive:
+                    ratios = {k: archive[k] for k in archive.files}
+            except (OSError, ValueError, EOFError):
+                raise RunError(f"{ratios_path}: unreadable (not a .npz archive)") from None
+            for key, value in ratios.items():
+                if value.ndim != 2 or value.shape[1] != 4 or not np.issubdtype(value.dtype, np.number):
+                    raise RunError(f"{ratios_path}: '{key}' must be (n, 4) numbers (RGB and luminance ratios), "
+                                   f"got {value.dtype} {value.shape}")
         entries.append((metrics, ratios))
         rows.append(compare_row(metrics, ratios, os.path.abspath(folder), tag))
     figs = compare_figures(entries, [run_label(r) for r in rows])

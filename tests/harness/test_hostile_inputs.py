@@ -567,6 +567,11 @@ def test_report_without_ground_truth_is_the_self_check(tmp_path, capsys):
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "self-check report" in html and html.count("<img") == 3
     assert not (tmp_path / "rep" / "ratios.npz").exists()
+    # such a report compares beside one with ground truth (no ratios of its own); ratios of another shape are named
+    assert main(["compare", str(tmp_path / "rep"), str(tmp_path / "with-truth"), "-o", str(tmp_path / "cmp")]) == 0
+    np.savez(tmp_path / "with-truth" / "ratios.npz", diffuse=np.ones(5))
+    expect_error(capsys, ["compare", tmp_path / "with-truth", "-o", tmp_path / "cmp2"], "ratios.npz", "(n, 4)",
+                 inputs=[tmp_path / "with-truth"], absent=[tmp_path / "cmp2"])
 
 
 def test_report_with_ground_truth_holds_the_self_check_too(copy, tmp_path):
