@@ -16,7 +16,7 @@ from harness.io.jsonio import dump_json, load_json
 from harness.io.runs import RunError, read_run, versions
 from harness.scene.export import export_scene, render_estimate
 from harness.scene.relight import render_truth
-from reports.html import compare_page, report_page
+from reports.html import compare_page, lookup, report_page
 from reports.protocols import PROTOCOLS
 from reports.regression import check
 from reports.report import (
@@ -207,14 +207,6 @@ def check_metrics_format(metrics, path: str) -> dict:
     for key in ("parameters", "estimate_timings"):
         if not isinstance(metrics.get(key), (dict, type(None))):
             raise RunError(f"{path}: '{key}' must be an object or null, got {str(metrics[key])[:60]!r}")
-    history = (metrics.get("albedo") or {}).get("diffuse") if isinstance(metrics.get("albedo"), dict) else None
-    history = history.get("psnr_history") if isinstance(history, dict) else None
-    if history is not None and not (isinstance(history, dict) and all(
-            isinstance(history.get(k, []), list) and all(v is None or (type(v) in (int, float))
-                                                       for v in history.get(k, []))
-            for k in ("seconds", "psnr_lstsq"))):
-        raise RunError(f"{path}: 'albedo.diffuse.psnr_history' must hold lists of numbers under 'seconds' and "
-                       f"'psnr_lstsq', got {str(history)[:60]!r}")
     for dotted in COMPARED_NUMBERS:
         node = metrics
         for depth, key in enumerate(dotted.split(".")):
@@ -225,9 +217,20 @@ def check_metrics_format(metrics, path: str) -> dict:
             if inner and not isinstance(node, (dict, type(None))):
                 raise RunError(f"{path}: '{'.'.join(dotted.split('.')[:depth + 1])}' must be an object or null, "
                                f"got {node!r}")
-            if not inner and (isinstance(node, bool) or not isinstance(node, (int, float, type(None)))):
+            if not inner and not _number_or_null(node):
                 raise RunError(f"{path}: '{dotted}' must be a number or null, got {node!r}")
+    history = lookup(metrics, "albedo.diffuse.psnr_history")   # its parents are objects or null by now
+    if history is not None and not (isinstance(history, dict) and all(
+            isinstance(history.get(k, []), list) and all(map(_number_or_null, history.get(k, [])))
+            for k in ("seconds", "psnr_lstsq"))):
+        raise RunError(f"{path}: 'albedo.diffuse.psnr_history' must hold lists of numbers under 'seconds' and "
+                       f"'psnr_lstsq', got {str(history)[:60]!r}")
     return metrics
+
+
+def _number_or_null(value) -> bool:
+    """A JSON number (not a boolean) or null."""
+    return value is None or type(value) in (int, float)
 
 
 def compare_runs(folders: list[str], out_dir: str, overwrite: bool = False,

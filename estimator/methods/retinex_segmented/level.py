@@ -56,13 +56,12 @@ def coat_level(h: Hypothesis, edges: np.ndarray, reached: np.ndarray, transfer: 
     for k in range(ROUNDS):
         less = radiance - level
         usable = base & np.all(less > 0, axis=1)   # faces the level leaves some radiance
+        # the light the object reflects onto each face, from the radiance less the level
+        indirect = {} if transfer is None else {"indirect": transfer @ np.where(usable[:, None], less, 0.0)}
         if k:   # the light again, on the radiance less the level
-            indirect = {} if transfer is None else {"indirect": transfer @ np.where(usable[:, None], less, 0.0)}
             light = edge_fit.log_shading_fit(np.where(usable[:, None], less, 1.0), columns, edges, usable, labels,
                                              initial=light, **fit, **indirect)[0]
-        shade = columns @ light
-        if transfer is not None:
-            shade = shade + transfer @ np.where(usable[:, None], less, 0.0)
+        shade = columns @ light + indirect.get("indirect", 0.0)
         lit = base & np.all(shade > 0, axis=1)
         if not lit.any():
             return CoatLevel(np.zeros(3), 0.0, 0.0)
