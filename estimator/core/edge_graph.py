@@ -4,8 +4,18 @@ and the footprints' total variation (:mod:`estimator.pipeline.footprints`) both 
 differences across edges and reweigh them at every step."""
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 from scipy import sparse
+
+# the graphs built last, by their edges: the fits of one solve run over the same edges many
+# times (the sun search fits once per trial direction, each fit of a hypothesis on the faces
+# whose radiance is usable), and building the sparsity pattern (a sort of F + 2E keys) costs
+# a few times one Gauss-Newton step of a small light
+_RECENT: dict[tuple, "EdgeGraph"] = {}
+_RECENT_SIZE = 4
+_RECENT_LOCK = threading.Lock()
 
 
 class EdgeGraph:
@@ -22,6 +32,25 @@ class EdgeGraph:
         self._pattern = sparse.csr_matrix((np.ones(len(keys)), (keys // faces, keys % faces)), shape=(faces, faces))
         self._pattern.sort_indices()
         self._pattern_rows = np.repeat(np.arange(faces), np.diff(self._pattern.indptr))
+        # where every entry has one contribution (no face pair listed twice, no edge from a face
+        # to itself), each entry is written in place: its face's diagonal, or its edge's -w
+        self._distinct = len(keys) == faces + 2 * len(i)
+
+    @classmethod
+    def of(cls, i: np.ndarray, j: np.ndarray, faces: int) -> "EdgeGraph":
+        """The graph of the edges (i, j) (E',) of F ``faces``, built once for the last few
+        distinct edge sets and shared (a graph is never changed after it is built)."""
+        i, j = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+        key = (faces, i.tobytes(), j.tobytes())
+        with _RECENT_LOCK:
+            graph = _RECENT.get(key)
+        if graph is None:
+            graph = cls(i, j, faces)
+            with _RECENT_LOCK:
+                if len(_RECENT) >= _RECENT_SIZE:
+                    del _RECENT[next(iter(_RECENT))]   # the oldest
+                _RECENT[key] = graph
+        return graph
 
     def __len__(self) -> int:
         return len(self.i)
@@ -43,7 +72,15 @@ class EdgeGraph:
         degree = np.bincount(self.i, w, self.faces) + np.bincount(self.j, w, self.faces)
         if diagonal is not None:
             degree = degree + diagonal
-        data = np.bincount(self._slot, np.concatenate([degree, -w, -w]), self._pattern.nnz)
-        if scale is not None:
-            data *= scale[self._pattern_rows] * scale[self._pattern.indices]
+        if not self._distinct:
+            data = np.bincount(self._slot, np.concatenate([degree, -w, -w]), self._pattern.nnz)
+            if scale is not None:
+                data *= scale[self._pattern_rows] * scale[self._pattern.indices]
+        else:   # the same values written per face and per edge: half the gathers of the above
+            faces, edges = self.faces, len(self.i)
+            off = -w if scale is None else -w * (scale[self.i] * scale[self.j])
+            data = np.empty(self._pattern.nnz)
+            data[self._slot[:faces]] = degree if scale is None else degree * (scale * scale)
+            data[self._slot[faces:faces + edges]] = off
+            data[self._slot[faces + edges:]] = off
         return sparse.csr_matrix((data, self._pattern.indices, self._pattern.indptr), shape=self._pattern.shape)

@@ -192,7 +192,7 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
         group, member = group[touched[member]], compact[member[touched[member]]]
     penalty = ridge * (len(i) + len(member)) * (_degrees(m)[1:] * (_degrees(m)[1:] + 1)) ** 2
     albedo = np.zeros((regions, channels))
-    graph = EdgeGraph(i, j, len(faces))
+    graph = EdgeGraph.of(i, j, len(faces))
     rows = c_matrix if len(faces) == f else c_matrix[faces]
     # the unknowns' columns (the DC is the gauge without ``indirect``), copied once for the
     # channels' Gauss-Newton products
@@ -228,10 +228,12 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, regions, light, u
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
+    by_region = _region_pattern(member, group, regions, len(ell))
     block, change = None, np.inf
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, graph, member, group, alpha)
-        weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual)))
+        size = np.abs(residual)
+        weights = robust.irls_weights(size, loss, robust.robust_scale(size))
         # the log shading's gradient is columns / shade per face; 0 on faces outside the fit
         # (their shading may be 0: a face that sees no sky), which no edge or region row reads
         inverse_shade = np.where(usable, 1.0 / np.where(usable, shade, 1.0), 0.0)
@@ -239,7 +241,7 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, regions, light, u
         if fresh:
             block = _light_block(columns, inverse_shade, graph, member, weights)
         normal, gradient = _normal_equations(columns, inverse_shade, graph, member, group, regions, weights,
-                                             residual, block)
+                                             residual, block, by_region)
         # the ridge on the light relative to its DC: with an ``extra`` shading the scale is
         # free, and a ridge on the coefficients themselves would shrink the whole light until
         # the (faint) extra term is as bright as the direct, bending its shape
@@ -283,11 +285,20 @@ def _light_block(columns, inverse_shade, graph, member, weights) -> np.ndarray:
     return columns.T @ (graph.laplacian(weights[:ne], inverse_shade, on_diagonal) @ columns)
 
 
-def _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual, block):
+def _region_pattern(member, group, regions, faces) -> tuple[np.ndarray, sparse.csr_matrix]:
+    """The region rows' (R, F) matrix pattern, one entry per member face (R', F) in its region's row,
+    and the order (R',) that puts per-member values in its entries; formed once per fit, refilled
+    at every step (the matrix is the same as one built from (group, member) pairs)."""
+    order = np.argsort(group, kind="stable")   # rows in turn, each row's faces ascending as ``member`` is
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(group, minlength=regions))])
+    return order, sparse.csr_matrix((np.ones(len(member)), member[order], indptr), shape=(regions, faces))
+
+
+def _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual, block, by_region):
     """Gauss-Newton normal equations (J^T W J, J^T W r) of :func:`_residuals` with respect to
     the light coefficients and the regions' log albedos, without forming J; ``block`` (k, k):
     the light's block of J^T W J (:func:`_light_block`, formed by the caller, which keeps it
-    while steps are small).
+    while steps are small); ``by_region``: the region rows' pattern (:func:`_region_pattern`).
 
     The log shading's gradient per face is g = D c, ``columns`` c (F, k) the diffuse rows of
     the unknowns and D = diag(``inverse_shade``) (F,) (0 outside the fit). An edge's row is
@@ -308,7 +319,9 @@ def _normal_equations(columns, inverse_shade, graph, member, group, regions, wei
         pulled = pulled + np.bincount(member, w_region * r_region, faces)
     gradient[:k] = -(columns.T @ (inverse_shade * pulled))
     if len(member):
-        cross = sparse.csr_matrix((w_region * inverse_shade[member], (group, member)), shape=(regions, faces)) @ columns
+        order, pattern = by_region
+        entries = (w_region * inverse_shade[member])[order]
+        cross = sparse.csr_matrix((entries, pattern.indices, pattern.indptr), shape=pattern.shape) @ columns
         normal[:k, k:] = cross.T
         normal[k:, :k] = cross
         normal[k:, k:] = np.diag(np.bincount(group, w_region, minlength=regions))

@@ -121,7 +121,7 @@ class Method(ABC):
         if self.loss == "none":
             return np.ones(len(prep.obs.face))
         obs = prep.obs
-        return robust.initial_weights(obs.face, obs.rgb, obs.num_faces, self.config.glint_ratio)
+        return robust.initial_weights(obs.face, obs.rgb, obs.num_faces, self.config.glint_ratio, obs.face_levels)
 
     def _reweight(self, prep: Prepared, face_group: np.ndarray, result: BilinearResult,
                   base: np.ndarray | None = None) -> np.ndarray:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -11,6 +12,7 @@ from ..core.errors import InputError
 from ..core.reductions import group_quantile
 from ..core.settings import Section
 from ..rays.raycast import RayCaster
+from ..solvers import robust
 from .footprints import Footprints, footprint_radiance, pixel_shares, unmixed_rows
 
 
@@ -90,6 +92,14 @@ class Observations:
     view: np.ndarray | None = None
     unresolved: np.ndarray | None = None
     footprint_pixels: float | None = None
+
+    @cached_property
+    def face_levels(self) -> np.ndarray:
+        """(num_faces,) the norm of each face's median colour over its rows
+        (:func:`estimator.solvers.robust.face_levels`): every robust solve on these rows clips
+        glints to it, so it is computed once per set of rows (a new set, e.g. the colours less a
+        coat's reflection, is a new ``Observations``)."""
+        return robust.face_levels(self.face, self.rgb, self.num_faces)
 
     def subset(self, keep: np.ndarray) -> "Observations":
         """The rows where ``keep`` (N,) is true."""

@@ -56,11 +56,13 @@ def face_levels(face: np.ndarray, rgb: np.ndarray, num_faces: int) -> np.ndarray
     return np.linalg.norm(np.nan_to_num(med), axis=1)
 
 
-def initial_weights(face: np.ndarray, rgb: np.ndarray, num_faces: int, ratio: float) -> np.ndarray:
+def initial_weights(face: np.ndarray, rgb: np.ndarray, num_faces: int, ratio: float,
+                    levels: np.ndarray | None = None) -> np.ndarray:
     """(N,) weights before any fit: a row brighter than ``ratio`` x its face's median colour
     norm is softly clipped to that level (weight (ratio level / norm)^2), so a glint cannot
-    dominate the first solve; later IRLS rounds judge it by the model's residual."""
-    level = face_levels(face, rgb, num_faces)[face]
+    dominate the first solve; later IRLS rounds judge it by the model's residual. ``levels``
+    (F,): :func:`face_levels` of these rows, where already computed (None: computed here)."""
+    level = (face_levels(face, rgb, num_faces) if levels is None else levels)[face]
     norm = np.linalg.norm(rgb, axis=1)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         w = np.where(norm > ratio * level, (ratio * level / np.maximum(norm, 1e-300)) ** 2, 1.0)

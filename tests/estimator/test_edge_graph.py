@@ -3,7 +3,7 @@ import numpy as np
 from scipy import sparse
 
 from estimator.core.edge_graph import EdgeGraph
-from estimator.light.edge_fit import _light_block, _normal_equations
+from estimator.light.edge_fit import _light_block, _normal_equations, _region_pattern
 
 
 def _incidence(i, j, faces):
@@ -39,6 +39,54 @@ def test_the_scaled_laplacian_is_d_b_transpose_w_b_d():
     np.testing.assert_allclose(graph.laplacian(w, d).toarray(), expected, atol=1e-12)
 
 
+def test_the_laplacian_of_distinct_edges_is_written_in_place():
+    """A mesh's edges (each face pair once, no loop) take the path that writes each entry in
+    place: D (B^T diag(w) B + diag(r)) D to 1e-12, with zeros in d and a face on no edge."""
+    rng = np.random.default_rng(4)
+    faces = 36
+    grid = np.arange(35).reshape(5, 7)                           # face 35 is on no edge
+    i = np.r_[grid[:, :-1].ravel(), grid[:-1, :].ravel()]
+    j = np.r_[grid[:, 1:].ravel(), grid[1:, :].ravel()]
+    graph, b = EdgeGraph(i, j, faces), _incidence(i, j, faces)
+    assert graph._distinct
+    w, d, r = rng.random(len(i)), rng.random(faces) * 3, rng.random(faces)
+    d[[3, 20]] = 0.0
+    expected = (sparse.diags(d) @ (b.T @ sparse.diags(w) @ b + sparse.diags(r)) @ sparse.diags(d)).toarray()
+    np.testing.assert_allclose(graph.laplacian(w, d, r).toarray(), expected, atol=1e-12)
+    np.testing.assert_allclose(graph.laplacian(w).toarray(), (b.T @ sparse.diags(w) @ b).toarray(), atol=1e-12)
+
+
+def test_graphs_of_equal_edges_are_shared():
+    """EdgeGraph.of builds a graph once per distinct edge set among the last few: equal arrays
+    (other objects) give the same graph, other edges or another face count a new one, and a
+    set pushed out by four others is built again."""
+    i, j = np.array([0, 1, 2]), np.array([1, 2, 3])
+    first = EdgeGraph.of(i, j, 4)
+    assert EdgeGraph.of(i.copy(), j.copy(), 4) is first
+    assert EdgeGraph.of(i, j, 5) is not first
+    assert EdgeGraph.of(i, np.array([1, 2, 0]), 4) is not first
+    for extra in range(4):
+        EdgeGraph.of(np.array([extra]), np.array([extra + 1]), 9)
+    again = EdgeGraph.of(i, j, 4)
+    assert again is not first and len(again) == 3 and again.faces == 4
+
+
+def test_the_region_pattern_is_the_matrix_of_its_pairs():
+    """_region_pattern's entries, refilled through its order, give the (R, F) matrix built from
+    the (group, member) pairs, bit for bit in its stored arrays."""
+    rng = np.random.default_rng(5)
+    faces, regions = 50, 4
+    member = np.sort(rng.choice(faces, 30, replace=False))
+    group = rng.integers(0, regions, 30)
+    values = rng.random(30)
+    order, pattern = _region_pattern(member, group, regions, faces)
+    refilled = sparse.csr_matrix((values[order], pattern.indices, pattern.indptr), shape=pattern.shape)
+    built = sparse.csr_matrix((values, (group, member)), shape=(regions, faces))
+    np.testing.assert_array_equal(refilled.indptr, built.indptr)
+    np.testing.assert_array_equal(refilled.indices, built.indices)
+    np.testing.assert_array_equal(refilled.data, built.data)
+
+
 def test_difference_and_gather_are_b_and_its_transpose():
     """(E',) B x and (F,) B^T v, shapes and values, and <B x, v> = <x, B^T v>."""
     rng = np.random.default_rng(1)
@@ -69,7 +117,7 @@ def test_normal_equations_are_j_transpose_w_j_of_the_explicit_jacobian():
     weights, residual = rng.random(len(i) + len(member)), rng.normal(size=len(i) + len(member))
     block = _light_block(columns, inverse_shade, graph, member, weights)
     normal, gradient = _normal_equations(columns, inverse_shade, graph, member, group, regions, weights, residual,
-                                         block)
+                                         block, _region_pattern(member, group, regions, faces))
     g = columns * inverse_shade[:, None]
     jacobian = np.zeros((len(i) + len(member), k + regions))
     jacobian[:len(i), :k] = -(g[i] - g[j])
@@ -82,7 +130,7 @@ def test_normal_equations_are_j_transpose_w_j_of_the_explicit_jacobian():
     none = np.zeros(0, int)
     block = _light_block(columns, inverse_shade, graph, none, weights[edges_only])
     normal, gradient = _normal_equations(columns, inverse_shade, graph, none, none, 0, weights[edges_only],
-                                         residual[edges_only], block)
+                                         residual[edges_only], block, _region_pattern(none, none, 0, faces))
     jacobian = jacobian[:len(i), :k]
     np.testing.assert_allclose(normal, jacobian.T @ (weights[edges_only, None] * jacobian), atol=1e-10)
     np.testing.assert_allclose(gradient, jacobian.T @ (weights[edges_only] * residual[edges_only]), atol=1e-10)

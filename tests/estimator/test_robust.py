@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from estimator.core.errors import InputError
+from estimator.pipeline.observations import Observations
 from estimator.solvers import robust
 from estimator.solvers.bilinear import solve_bilinear
 
@@ -30,6 +31,19 @@ def test_initial_weights_clip_glints_to_the_ratio():
     np.testing.assert_array_equal(w[[0, 1, 2, 4, 5]], 1.0)
     level = np.linalg.norm([1.05, 1, 1])                     # the median colour of face 0
     assert w[3] == pytest.approx((4 * level / np.linalg.norm(rgb[3])) ** 2)
+
+
+def test_initial_weights_take_the_levels_the_observations_keep():
+    """Observations.face_levels is robust.face_levels of its rows, computed once (the same array
+    on every read); initial_weights given it equal those that compute it."""
+    rng = np.random.default_rng(0)
+    face = rng.integers(0, 5, 60)
+    rgb = rng.random((60, 3)) * rng.choice([1.0, 30.0], (60, 1), p=[0.9, 0.1])
+    obs = Observations(face, rgb, np.tile([0.0, 0.0, 1.0], (60, 1)), 6, 1)
+    np.testing.assert_array_equal(obs.face_levels, robust.face_levels(face, rgb, 6))
+    assert obs.face_levels is obs.face_levels
+    np.testing.assert_array_equal(robust.initial_weights(face, rgb, 6, 4.0, obs.face_levels),
+                                  robust.initial_weights(face, rgb, 6, 4.0))
 
 
 def test_robust_scale_is_the_normalised_median():
