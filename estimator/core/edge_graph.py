@@ -12,9 +12,12 @@ from scipy import sparse
 # the graphs built last, by their edges: the fits of one solve run over the same edges many
 # times (the sun search fits once per trial direction, each fit of a hypothesis on the faces
 # whose radiance is usable), and building the sparsity pattern (a sort of F + 2E keys) costs
-# a few times one Gauss-Newton step of a small light
+# a few times one Gauss-Newton step of a small light. At most _RECENT_SIZE graphs and
+# _RECENT_BYTES in all are kept (a graph of a million faces is about 32 MiB), the oldest
+# dropped first.
 _RECENT: dict[tuple, "EdgeGraph"] = {}
 _RECENT_SIZE = 4
+_RECENT_BYTES = 64 * 2 ** 20
 _RECENT_LOCK = threading.Lock()
 
 
@@ -39,18 +42,28 @@ class EdgeGraph:
     @classmethod
     def of(cls, i: np.ndarray, j: np.ndarray, faces: int) -> "EdgeGraph":
         """The graph of the edges (i, j) (E',) of F ``faces``, built once for the last few
-        distinct edge sets and shared (a graph is never changed after it is built)."""
-        i, j = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+        distinct edge sets and shared: it holds copies of ``i`` and ``j``, and neither it nor
+        the matrices of :meth:`laplacian` (whose index arrays are its pattern's) may be changed
+        in place."""
+        i, j = np.array(i, dtype=np.int64), np.array(j, dtype=np.int64)   # copies: the caller's may change
         key = (faces, i.tobytes(), j.tobytes())
         with _RECENT_LOCK:
             graph = _RECENT.get(key)
         if graph is None:
             graph = cls(i, j, faces)
-            with _RECENT_LOCK:
-                if len(_RECENT) >= _RECENT_SIZE:
-                    del _RECENT[next(iter(_RECENT))]   # the oldest
-                _RECENT[key] = graph
+            if graph.nbytes <= _RECENT_BYTES:   # one larger alone is built each time
+                with _RECENT_LOCK:
+                    _RECENT[key] = graph
+                    while len(_RECENT) > _RECENT_SIZE or sum(g.nbytes for g in _RECENT.values()) > _RECENT_BYTES:
+                        del _RECENT[next(iter(_RECENT))]   # the oldest
         return graph
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the graph's arrays (its edges twice: they also key :meth:`of`'s cache)."""
+        p = self._pattern
+        return (2 * (self.i.nbytes + self.j.nbytes) + self._slot.nbytes + self._pattern_rows.nbytes
+                + p.data.nbytes + p.indices.nbytes + p.indptr.nbytes)
 
     def __len__(self) -> int:
         return len(self.i)

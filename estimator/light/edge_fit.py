@@ -197,10 +197,11 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     # the unknowns' columns (the DC is the gauge without ``indirect``), copied once for the
     # channels' Gauss-Newton products
     columns = np.ascontiguousarray(rows[:, (1 if indirect is None else 0):])
+    by_region = _region_pattern(member, group, regions, len(faces))
     for c in range(channels):
         light[:, c], albedo[:, c] = _fit_channel(log_radiance[faces, c], rows, columns, graph, member, group,
-                                                 regions, light[:, c], usable[faces], loss, penalty, iterations,
-                                                 None if indirect is None else indirect[faces, c])
+                                                 by_region, regions, light[:, c], usable[faces], loss, penalty,
+                                                 iterations, None if indirect is None else indirect[faces, c])
     missing = np.bincount(group, minlength=regions) == 0
     if missing.any():   # regions whose faces were not drawn: the median under the fitted light
         tied = np.nonzero(usable & missing[np.maximum(labels, 0)] & (labels >= 0))[0]
@@ -210,11 +211,12 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     return light, np.exp(albedo)
 
 
-def _fit_channel(ell, c_matrix, columns, graph, member, group, regions, light, usable, loss, penalty, iterations,
-                 extra=None):
+def _fit_channel(ell, c_matrix, columns, graph, member, group, by_region, regions, light, usable, loss, penalty,
+                 iterations, extra=None):
     """One channel's Gauss-Newton fit. Unknowns: the light's coefficients from ``first`` on
     (1: the DC is the gauge; 0 with an additive ``extra`` shading, which fixes the scale)
-    and the regions' log albedos; ``columns`` is ``c_matrix[:, first:]``, contiguous."""
+    and the regions' log albedos; ``columns`` is ``c_matrix[:, first:]``, contiguous;
+    ``by_region`` the region rows' pattern (:func:`_region_pattern`)."""
     first = 1 if extra is None else 0
     extra = np.zeros(len(ell)) if extra is None else extra
     penalty = np.concatenate([[0.0], penalty]) if first == 0 else penalty
@@ -228,7 +230,6 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, regions, light, u
              if regions else np.zeros(0))
     k = len(light) - first
     n = k + regions
-    by_region = _region_pattern(member, group, regions, len(ell))
     block, change = None, np.inf
     for _ in range(iterations if n else 0):   # n = 0: a DC-only light with no regions, nothing to fit
         residual = _residuals(ell, log_shade, graph, member, group, alpha)
@@ -286,9 +287,11 @@ def _light_block(columns, inverse_shade, graph, member, weights) -> np.ndarray:
 
 
 def _region_pattern(member, group, regions, faces) -> tuple[np.ndarray, sparse.csr_matrix]:
-    """The region rows' (R, F) matrix pattern, one entry per member face (R', F) in its region's row,
-    and the order (R',) that puts per-member values in its entries; formed once per fit, refilled
-    at every step (the matrix is the same as one built from (group, member) pairs)."""
+    """The order (R',) that puts per-member values in the region rows' matrix entries, and that
+    (R, F) matrix's pattern: one entry per member face (R',), in its region's row. Formed once
+    per fit and refilled at every step; for ``member`` sorted ascending and unique (as
+    :func:`log_shading_fit` passes it) the refilled matrix is, array for array, the one built
+    from the (group, member) pairs."""
     order = np.argsort(group, kind="stable")   # rows in turn, each row's faces ascending as ``member`` is
     indptr = np.concatenate([[0], np.cumsum(np.bincount(group, minlength=regions))])
     return order, sparse.csr_matrix((np.ones(len(member)), member[order], indptr), shape=(regions, faces))

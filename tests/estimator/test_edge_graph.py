@@ -56,6 +56,25 @@ def test_the_laplacian_of_distinct_edges_is_written_in_place():
     np.testing.assert_allclose(graph.laplacian(w).toarray(), (b.T @ sparse.diags(w) @ b).toarray(), atol=1e-12)
 
 
+def test_the_in_place_laplacian_is_bit_for_bit_the_summed_one():
+    """On distinct edges the entries written in place equal, bit for bit, those summed per slot
+    (the path of repeated pairs), for weights, scales (zeros included) and a diagonal; a loop
+    (an edge from a face to itself) or a pair listed both ways takes the summed path."""
+    rng = np.random.default_rng(6)
+    faces = 30
+    i = np.arange(faces - 1)
+    j = i + 1
+    graph = EdgeGraph(i, j, faces)
+    w, d, r = rng.random(len(i)) * 5, rng.random(faces) * 2, rng.random(faces)
+    d[[0, 7]] = 0.0
+    degree = np.bincount(i, w, faces) + np.bincount(j, w, faces) + r
+    summed = np.bincount(graph._slot, np.concatenate([degree, -w, -w]), graph._pattern.nnz)
+    summed *= d[graph._pattern_rows] * d[graph._pattern.indices]
+    np.testing.assert_array_equal(graph.laplacian(w, d, r).data, summed)
+    assert not EdgeGraph(np.r_[i, 3], np.r_[j, 3], faces)._distinct           # a loop
+    assert not EdgeGraph(np.r_[i, 5], np.r_[j, 4], faces)._distinct           # (4, 5) and (5, 4)
+
+
 def test_graphs_of_equal_edges_are_shared():
     """EdgeGraph.of builds a graph once per distinct edge set among the last few: equal arrays
     (other objects) give the same graph, other edges or another face count a new one, and a
@@ -69,6 +88,21 @@ def test_graphs_of_equal_edges_are_shared():
         EdgeGraph.of(np.array([extra]), np.array([extra + 1]), 9)
     again = EdgeGraph.of(i, j, 4)
     assert again is not first and len(again) == 3 and again.faces == 4
+    i[0] = 2                                                     # the caller's array changes later
+    np.testing.assert_array_equal(EdgeGraph.of(np.array([0, 1, 2]), j, 4).i, [0, 1, 2])
+
+
+def test_the_shared_graphs_are_bounded_in_bytes(monkeypatch):
+    """A graph larger than the cache's byte bound is built and returned but not kept, and the
+    kept graphs stay within the bound."""
+    from estimator.core import edge_graph
+    monkeypatch.setattr(edge_graph, "_RECENT_BYTES", 20_000)
+    small = EdgeGraph.of(np.array([0]), np.array([1]), 2)
+    big = EdgeGraph.of(np.arange(999), np.arange(1, 1000), 1000)
+    assert big.nbytes > 20_000 and len(big) == 999
+    assert EdgeGraph.of(np.arange(999), np.arange(1, 1000), 1000) is not big
+    assert sum(g.nbytes for g in edge_graph._RECENT.values()) <= 20_000
+    assert EdgeGraph.of(np.array([0]), np.array([1]), 2) is small
 
 
 def test_the_region_pattern_is_the_matrix_of_its_pairs():
