@@ -267,7 +267,33 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, by_region, region
         alpha = alpha + t * step[k:]
         if change < SHADING_TOLERANCE and fresh:
             break
+    if regions:
+        alpha = _region_levels(ell - log_shade, graph, member, group, regions, alpha, loss)
     return light, alpha
+
+
+def _region_levels(ratio, graph, member, group, regions, alpha, loss, iterations: int = 20) -> np.ndarray:
+    """(R,) the regions' log albedos at their optimum under the final light, from ``alpha``:
+    IRLS on the region rows alone, ``ratio`` (F,) the log radiance over the final log shading.
+
+    A Gauss-Newton step moves the log albedos by the linearised change of the log shading; a
+    long step along the light's scale (nearly free where only the faint indirect term fixes it)
+    changes the log shading by log(1 + t) and the albedos by -t, and the last step's remainder
+    would stay in every region. Where the fit converged this moves them by less than its
+    tolerance: a Gauss-Newton step that leaves the light still is this IRLS step."""
+    values = ratio[member]
+    # the scale of every row's residual, as the fit's last step weighed them
+    scale = robust.robust_scale(np.concatenate([np.abs(graph.difference(ratio)), np.abs(values - alpha[group])]))
+    for _ in range(iterations):
+        weights = robust.irls_weights(np.abs(values - alpha[group]), loss, scale)
+        total = np.bincount(group, weights, regions)
+        mean = np.bincount(group, weights * values, regions) / np.where(total > 0, total, 1.0)
+        updated = np.where(total > 0, mean, alpha)   # a region without a face in the fit keeps its value
+        moved = float(np.max(np.abs(updated - alpha), initial=0.0))
+        alpha = updated
+        if moved < SHADING_TOLERANCE:
+            break
+    return alpha
 
 
 def _residuals(ell, log_shade, graph, member, group, alpha) -> np.ndarray:
