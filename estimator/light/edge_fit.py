@@ -280,15 +280,21 @@ def _region_levels(ratio, graph, member, group, regions, alpha, loss, iterations
     long step along the light's scale (nearly free where only the faint indirect term fixes it)
     changes the log shading by log(1 + t) and the albedos by -t, and the last step's remainder
     would stay in every region. Where the fit converged this moves them by less than its
-    tolerance: a Gauss-Newton step that leaves the light still is this IRLS step."""
+    tolerance: a Gauss-Newton step that leaves the light still is this IRLS step. A region
+    whose every row a redescending loss (Tukey's) rejects at ``alpha`` starts again from its
+    median, as the fit started."""
     values = ratio[member]
-    # the scale of every row's residual, as the fit's last step weighed them
+    present = np.bincount(group, minlength=regions) > 0
+    # one scale for the update: the robust scale of every residual, edges' and regions', at the final light
     scale = robust.robust_scale(np.concatenate([np.abs(graph.difference(ratio)), np.abs(values - alpha[group])]))
     for _ in range(iterations):
         weights = robust.irls_weights(np.abs(values - alpha[group]), loss, scale)
         total = np.bincount(group, weights, regions)
         mean = np.bincount(group, weights * values, regions) / np.where(total > 0, total, 1.0)
         updated = np.where(total > 0, mean, alpha)   # a region without a face in the fit keeps its value
+        rejected = present & (total == 0)
+        if rejected.any():
+            updated[rejected] = group_quantile(group, values[:, None], regions, 0.5, interpolate=True)[rejected, 0]
         moved = float(np.max(np.abs(updated - alpha), initial=0.0))
         alpha = updated
         if moved < SHADING_TOLERANCE:
