@@ -226,8 +226,7 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, by_region, region
         light[0] = 1.0
         shade = c_matrix @ light + extra
     log_shade = np.log(np.maximum(shade, 1e-300))
-    alpha = (group_quantile(group, (ell - log_shade)[member][:, None], regions, 0.5, interpolate=True)[:, 0]
-             if regions else np.zeros(0))
+    alpha = _region_medians((ell - log_shade)[member], group, regions) if regions else np.zeros(0)
     k = len(light) - first
     n = k + regions
     block, change = None, np.inf
@@ -268,13 +267,20 @@ def _fit_channel(ell, c_matrix, columns, graph, member, group, by_region, region
         if change < SHADING_TOLERANCE and fresh:
             break
     if regions:
-        alpha = _region_levels(ell - log_shade, graph, member, group, regions, alpha, loss)
+        alpha = _region_levels(ell, log_shade, graph, member, group, regions, alpha, loss)
     return light, alpha
 
 
-def _region_levels(ratio, graph, member, group, regions, alpha, loss, iterations: int = 20) -> np.ndarray:
+def _region_medians(values: np.ndarray, group: np.ndarray, regions: int) -> np.ndarray:
+    """(R,) the median of each region's ``values`` (R',) (``group`` (R',) their regions): where
+    the fit starts the regions' log albedos."""
+    return group_quantile(group, values[:, None], regions, 0.5, interpolate=True)[:, 0]
+
+
+def _region_levels(ell, log_shade, graph, member, group, regions, alpha, loss, iterations: int = 20) -> np.ndarray:
     """(R,) the regions' log albedos at their optimum under the final light, from ``alpha``:
-    IRLS on the region rows alone, ``ratio`` (F,) the log radiance over the final log shading.
+    IRLS on the region rows alone, ``ell`` (F,) the log radiance and ``log_shade`` (F,) the final
+    log shading.
 
     A Gauss-Newton step moves the log albedos by the linearised change of the log shading; a
     long step along the light's scale (nearly free where only the faint indirect term fixes it)
@@ -283,10 +289,10 @@ def _region_levels(ratio, graph, member, group, regions, alpha, loss, iterations
     tolerance: a Gauss-Newton step that leaves the light still is this IRLS step. A region
     whose every row a redescending loss (Tukey's) rejects at ``alpha`` starts again from its
     median, as the fit started."""
-    values = ratio[member]
+    values = (ell - log_shade)[member]
     present = np.bincount(group, minlength=regions) > 0
     # one scale for the update: the robust scale of every residual, edges' and regions', at the final light
-    scale = robust.robust_scale(np.concatenate([np.abs(graph.difference(ratio)), np.abs(values - alpha[group])]))
+    scale = robust.robust_scale(np.abs(_residuals(ell, log_shade, graph, member, group, alpha)))
     for _ in range(iterations):
         weights = robust.irls_weights(np.abs(values - alpha[group]), loss, scale)
         total = np.bincount(group, weights, regions)
@@ -294,7 +300,7 @@ def _region_levels(ratio, graph, member, group, regions, alpha, loss, iterations
         updated = np.where(total > 0, mean, alpha)   # a region without a face in the fit keeps its value
         rejected = present & (total == 0)
         if rejected.any():
-            updated[rejected] = group_quantile(group, values[:, None], regions, 0.5, interpolate=True)[rejected, 0]
+            updated[rejected] = _region_medians(values, group, regions)[rejected]
         moved = float(np.max(np.abs(updated - alpha), initial=0.0))
         alpha = updated
         if moved < SHADING_TOLERANCE:
