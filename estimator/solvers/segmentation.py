@@ -182,6 +182,91 @@ def split_regions(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edg
     return out
 
 
+# two groups of a region's faces are two albedos, not one albedo's spread, when their medians
+# along the line through them lie farther apart than the sum of the groups' 99 % ranges'
+# half-widths: this many robust standard deviations (1.4826 MAD) of each, the normal
+# distribution's two-sided 99 % quantile. The two halves 2-means makes of any unimodal spread
+# (a Gaussian: medians 1.35 standard deviations apart, each half's robust deviation 0.59 of it)
+# stay far below; two albedos each with Gaussian noise part beyond 5.2 standard deviations.
+MODE_QUANTILE = 2.576
+
+
+def split_modes(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edges: np.ndarray,
+                min_size: int = 10) -> np.ndarray:
+    """(F,) ``labels`` with each region split in two, and each part again, while its valid
+    faces' :func:`albedo_features` fall into two modes (:func:`two_modes`) each with at least
+    ``min_size`` faces inside it: faces none of whose neighbours (``edges`` (E, 2)) in the
+    region lies on the other side. -1 stays -1; regions are renumbered 0..R'-1 in order of
+    their first face.
+
+    The segmentation joins neighbours within a fixed ``segment_threshold`` of each other, far
+    above the noise of a uniform region's faces; two regions whose albedos differ by less than
+    that (the same hue a little darker) become one, and their faces, under a light fitted with
+    that region tied, still fall into two groups with a gap between them many times their own
+    spread wide. A region's faces that spread smoothly (the shading model's misfit, a texture)
+    form no such gap and stay whole. Faces along a boundary whose colours blend the albedos on
+    either side (a pixel across it, a cluster of faces) can form a mode of their own, a strip
+    with no face inside it: such a side is no region."""
+    out = np.asarray(labels, dtype=np.int64).copy()
+    side_of = np.full(len(out), -1, dtype=np.int64)   # 1 / 0: the side of the region being split
+    e0, e1 = edges[:, 0], edges[:, 1]
+    feat = albedo_features(np.where(valid[:, None], albedo, 1.0))
+    todo, count = list(range(int(out.max()) + 1)), int(out.max()) + 1
+    while todo:   # one region at a time: a region is split at most (faces / min_size) times
+        region = todo.pop()
+        faces = np.nonzero(valid & (out == region))[0]
+        if len(faces) < 2 * min_size:
+            continue
+        side = two_modes(feat[faces], min_size)
+        if side is None:
+            continue
+        side_of[faces] = side
+        crossing = (side_of[e0] >= 0) & (side_of[e1] >= 0) & (side_of[e0] != side_of[e1])
+        border = np.zeros(len(out), dtype=bool)
+        border[e0[crossing]] = border[e1[crossing]] = True
+        side_of[faces] = -1
+        inner = ~border[faces]
+        if min(np.sum(inner & side), np.sum(inner & ~side)) < min_size:
+            continue
+        out[faces[side]] = count
+        todo += [region, count]
+        count += 1
+    inside = out >= 0
+    _, first = np.unique(out[inside], return_index=True)
+    order = np.argsort(np.argsort(first))        # renumber by first face, as the segmentation numbers them
+    out[inside] = order[np.unique(out[inside], return_inverse=True)[1]]
+    return out
+
+
+def two_modes(features: np.ndarray, min_size: int, iterations: int = 20) -> np.ndarray | None:
+    """(n,) bool: one side of the 2-means split of ``features`` (n, C) where the two sides are
+    two modes, else None. The split starts at the median along the principal axis and moves
+    by Lloyd's steps; the sides are two modes when each holds at least ``min_size`` points and,
+    projected on the line through their medians, their medians lie more than
+    :data:`MODE_QUANTILE` x (s_1 + s_2) apart, s_k each side's robust standard deviation there."""
+    centred = features - features.mean(axis=0)
+    axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    projected = centred @ axis
+    side = projected > np.median(projected)
+    for _ in range(iterations):
+        if side.all() or not side.any():
+            return None
+        a, b = features[side].mean(axis=0), features[~side].mean(axis=0)
+        moved = np.sum((features - a) ** 2, axis=1) < np.sum((features - b) ** 2, axis=1)
+        if np.array_equal(moved, side):
+            break
+        side = moved
+    if min(side.sum(), (~side).sum()) < min_size:
+        return None
+    line = np.median(features[side], axis=0) - np.median(features[~side], axis=0)
+    length = np.linalg.norm(line)
+    if length == 0:
+        return None
+    along = features @ (line / length)
+    spread = [1.4826 * np.median(np.abs(along[s] - np.median(along[s]))) for s in (side, ~side)]
+    return side if length > MODE_QUANTILE * sum(spread) else None
+
+
 def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, edges: np.ndarray,
             reach: float) -> np.ndarray:
     """Groups: the uniform regions; a face outside them joins the region whose albedo

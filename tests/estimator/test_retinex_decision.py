@@ -257,3 +257,39 @@ def test_kept_regions_ties_the_given_regions_as_they_are():
         inside = lit & (h.labels == k)
         np.testing.assert_allclose(h.albedo[inside], h.albedo[inside][:1].repeat(inside.sum(), 0))
     assert kept_regions(ctx, first, np.full(len(labels), -1)) is None
+
+
+@pytest.mark.parametrize("recorded", [True, False])
+def test_parted_regions_seeks_two_modes_only_in_the_colours_as_recorded(recorded):
+    """One region tied over two albedos 6 % apart (within segment_threshold, so the
+    threshold's split keeps them together) whose faces scatter by 0.5 %: on the colours as
+    recorded the parted hypothesis finds the two modes, one part each; on colours less a
+    coat's reflection (a refit's) the modes are not sought and nothing parts."""
+    from dataclasses import replace
+
+    from estimator.methods.retinex_segmented.edges import parted_regions
+    from estimator.methods.retinex_segmented.method import RetinexSegmented
+    from estimator.methods.retinex_segmented.values import FitContext, ReflectionFits
+    from estimator.pipeline.prepared import prepare
+
+    config = micro_config()
+    data, _ = micro_scene(config, specular=0.0)
+    prep = prepare(data, config)
+    method = RetinexSegmented(config)
+    _, first = method._fit(prep, ReflectionFits(prep.obs))
+    top = data.mesh.centroids[:, 1] > 0.2
+    shade = first.shading.columns @ first.light
+    rng = np.random.default_rng(0)
+    radiance = shade * 0.5 * np.where(top, 1.06, 1.0)[:, None] * np.exp(0.005 * rng.standard_normal(shade.shape))
+    tied = replace(first, radiance=radiance, labels=np.where(first.lit, 0, -1), regions=1)
+    ctx = FitContext(prep, config, method.model, method.loss, ReflectionFits(prep.obs), prep.edges, first.lit,
+                     dict(loss=method.loss, ridge=config.retinex_ridge, iterations=config.retinex_iterations,
+                          max_edges=config.retinex_max_edges), recorded=recorded)
+    h = parted_regions(ctx, tied)
+    if not recorded:
+        assert h is None
+        return
+    inside = h.lit & (h.labels >= 0)
+    assert h.regions == 2 and h.source.value == "edges and parted regions"
+    assert len(np.unique(h.labels[inside & top])) == 1 and len(np.unique(h.labels[inside & ~top])) == 1
+    assert h.labels[inside & top][0] != h.labels[inside & ~top][0]

@@ -3,7 +3,7 @@ import numpy as np
 
 from estimator.core.reductions import group_quantile
 from estimator.methods.segmented import BilinearSegmented
-from estimator.solvers.segmentation import albedo_features, bridge_faces, segment, split_regions
+from estimator.solvers.segmentation import albedo_features, bridge_faces, segment, split_modes, split_regions, two_modes
 
 from .meshes import sphere
 
@@ -84,6 +84,66 @@ def test_split_regions_parts_a_region_of_two_albedos_only():
     assert same.max() == 1                                # one albedo per region: nothing to split
     nothing = split_regions(np.full(mesh.num_faces, -1), albedo, valid, mesh.face_adjacency, 0.12, 0.08)
     assert np.all(nothing == -1)                          # no region: nothing to part
+
+
+def test_split_modes_parts_two_close_albedos_tied_as_one():
+    mesh = sphere(3)
+    band = np.digitize(mesh.centroids[:, 1], [-0.2, 0.2])          # three bands
+    green = np.array([0.30, 0.45, 0.27])
+    rng = np.random.default_rng(5)
+    # bands 0 and 1: two greens 10 % apart in brightness, within segment_threshold (0.12) of each
+    # other, tied into region 0 with 1 % noise; band 2 another region of one albedo, 3 % noise
+    albedo = green * np.where(band[:, None] == 1, 1.1, 1.0) * np.exp(0.01 * rng.standard_normal((mesh.num_faces, 3)))
+    albedo[band == 2] = np.array([0.1, 0.2, 0.6]) * np.exp(0.03 * rng.standard_normal((np.sum(band == 2), 3)))
+    labels = np.where(band == 2, 1, 0)
+    labels[np.nonzero(band == 2)[0][:5]] = -1                 # faces outside every region stay outside
+    valid = np.ones(mesh.num_faces, bool)
+    split = split_modes(labels, albedo, valid, mesh.face_adjacency)
+    assert np.all(split[labels < 0] == -1)
+    assert split.max() == 2 and all(len(np.unique(split[(band == b) & (labels >= 0)])) == 1 for b in range(3))
+    assert len({int(split[band == b][0]) for b in (0, 1)}) == 2
+    # the same 10 % apart on an invalid half: too few valid faces to show a mode there
+    few = valid & ~((band == 1) & (np.arange(mesh.num_faces) % 40 != 0))
+    assert split_modes(labels, albedo, few, mesh.face_adjacency).max() == 1
+
+
+def test_split_modes_keeps_a_strip_of_blended_faces_with_no_face_inside_it():
+    mesh = sphere(3)
+    y = mesh.vertices[mesh.faces][:, :, 1]
+    strip = (y.min(axis=1) < 0) & (y.max(axis=1) > 0)              # the faces across the equator
+    rng = np.random.default_rng(7)
+    # a boundary's blends: 20 % darker than the region, a mode of their own by the features
+    albedo = np.array([0.4, 0.3, 0.2]) * np.where(strip, 0.8, 1.0)[:, None] \
+        * np.exp(0.01 * rng.standard_normal((mesh.num_faces, 3)))
+    labels, valid = np.zeros(mesh.num_faces, dtype=np.int64), np.ones(mesh.num_faces, bool)
+    features = albedo_features(albedo)
+    assert strip.sum() >= 20 and two_modes(features, 10) is not None
+    assert split_modes(labels, albedo, valid, mesh.face_adjacency).max() == 0
+    band = np.abs(mesh.centroids[:, 1]) < 0.35                       # a band some faces wide has an inside
+    wide = np.array([0.4, 0.3, 0.2]) * np.where(band, 0.8, 1.0)[:, None] \
+        * np.exp(0.01 * rng.standard_normal((mesh.num_faces, 3)))
+    split = split_modes(labels, wide, valid, mesh.face_adjacency)
+    assert split.max() == 1 and len(np.unique(split[band])) == 1 and split[band][0] != split[~band][0]
+
+
+def test_two_modes_keeps_one_albedo_spread_smoothly_or_with_heavy_tails():
+    rng = np.random.default_rng(6)
+    n = 2000
+    gaussian = rng.standard_normal((n, 4)) * [0.05, 0.01, 0.01, 0.01]
+    smooth = np.column_stack([np.linspace(-0.3, 0.3, n), np.zeros((n, 3))])          # a shading misfit's ramp
+    heavy = rng.standard_cauchy((n, 4)) * 0.02
+    for features in (gaussian, smooth, heavy):
+        assert two_modes(features, 10) is None
+    apart = gaussian.copy()
+    apart[: n // 4, 0] += 6 * 0.05                                 # a quarter 6 standard deviations brighter
+    side = two_modes(apart, 10)
+    assert side is not None
+    brighter = side if np.mean(side[: n // 4]) > 0.5 else ~side
+    # 2-means parts them midway, 3 standard deviations from each: 0.13 % of either side cross
+    assert np.mean(brighter[: n // 4]) > 0.99 and np.mean(brighter[n // 4:]) < 0.01
+    small = gaussian.copy()
+    small[:9, 0] += 1.0                                            # 9 faces far off: below min_size
+    assert two_modes(small, 10) is None
 
 
 def test_textured_faces_stay_out_of_uniform_regions():

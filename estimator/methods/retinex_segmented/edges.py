@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...light import edge_fit, sun
-from ...solvers.segmentation import assign_to_regions, segment, split_regions
+from ...solvers.segmentation import assign_to_regions, segment, split_modes, split_regions
 from .shading import deviation, divide, in_unit_dc
 from .values import FitContext, Hypothesis, LightSource, Shading
 
@@ -80,14 +80,21 @@ def parted_regions(ctx: FitContext, tied: Hypothesis) -> Hypothesis | None:
     """The tied hypothesis with each region parted where, under its light, the faces' own
     albedos fall into parts more than ``segment_threshold`` apart (:func:`split_regions`: the
     segmentation joins components apart generously, and a light fitted to two albedos tied
-    as one still leaves them apart), the light fitted once more with the parts tied; None
-    where nothing parts. Whether the parts are two albedos or one albedo the model misfits
-    (a coat's reflection in some faces' radiance) is for the prediction cost to decide
-    (:mod:`.decision`): each part's albedo is three more unknowns."""
+    as one still leaves them apart), and, on the colours as recorded (``ctx.recorded``), where
+    they fall into two modes (:func:`split_modes`: two albedos closer than the threshold); the
+    light fitted once more with the parts tied; None where nothing parts. Colours less a
+    coat's reflection or level carry that fit's misfit, which differs from face to face and
+    can spread one albedo's faces into modes of their own: there the first fit's regions are
+    offered as they are (:func:`kept_regions`). Whether the parts are two albedos or one
+    albedo the model misfits (a coat's reflection in some faces' radiance) is for the
+    prediction cost to decide (:mod:`.decision`): each part's albedo is three more unknowns."""
     c = ctx.config
     albedo, lit = divide(tied.shading, tied.radiance, tied.light, ctx.usable, ctx.extra)
-    labels = split_regions(tied.labels, in_unit_dc(albedo, tied.light), lit, ctx.edges, c.segment_threshold,
-                           c.uniform_spread, bridges=ctx.prep.blends_albedos)
+    features = in_unit_dc(albedo, tied.light)
+    labels = split_regions(tied.labels, features, lit, ctx.edges, c.segment_threshold, c.uniform_spread,
+                           bridges=ctx.prep.blends_albedos)
+    if ctx.recorded:
+        labels = split_modes(labels, features, lit, ctx.edges)
     regions = int(labels.max()) + 1
     if regions <= tied.regions:
         return None

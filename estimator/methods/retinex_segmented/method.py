@@ -191,7 +191,7 @@ class RetinexSegmented(Method):
         if not found.level.any():
             return prep, est, chosen, found.level
         less = replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - found.level))
-        refit, hypothesis = self._fit(less, fits, first_sun(chosen))
+        refit, hypothesis = self._fit(less, fits, first_sun(chosen), recorded=False)
         if LightSource(refit.info["light_from"]).models_the_coat:
             return prep, est, chosen, np.zeros(3)
         return less, refit, hypothesis, found.level
@@ -219,7 +219,7 @@ class RetinexSegmented(Method):
             return est, chosen, None
         found = first_sun(chosen)
         regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
-        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions)
+        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions, False)
                   for _, reflection in candidates]
         # a coat's unknowns: its groups' strengths and two of the grey colour; a lobe's exponent one more
         costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
@@ -284,11 +284,13 @@ class RetinexSegmented(Method):
                     max_edges=c.retinex_max_edges)
 
     def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None,
-             labels: np.ndarray | None = None) -> tuple[Estimate, Hypothesis]:
+             labels: np.ndarray | None = None, recorded: bool = True) -> tuple[Estimate, Hypothesis]:
         """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
         (None: search for one when ``sun_min_gain`` < 1); ``labels``: an earlier fit's uniform
-        regions, offered tied as they are (:func:`.edges.kept_regions`). Returns the chosen
-        estimate and its hypothesis."""
+        regions, offered tied as they are (:func:`.edges.kept_regions`); ``recorded``: False
+        where ``prep``'s colours are less a coat's reflection or level a refit subtracted (the
+        parted regions' modes are then not sought, :func:`.edges.parted_regions`). Returns the
+        chosen estimate and its hypothesis."""
         c = self.config
         mesh, obs = prep.data.mesh, prep.obs
         radiance = group_quantile(obs.face, obs.rgb, mesh.num_faces, c.retinex_quantile)
@@ -298,7 +300,7 @@ class RetinexSegmented(Method):
         if not usable.any():
             raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
         ctx = FitContext(prep, c, self.model, self.loss, fits, prep.edges, usable,
-                         self._edge_fit_arguments())
+                         self._edge_fit_arguments(), recorded=recorded)
         if c.interreflection:
             if fits.transfer is None:
                 fits.transfer = indirect.indirect_transfer(prep.caster, prep.sampling, prep.visibility)

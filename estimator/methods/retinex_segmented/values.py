@@ -123,6 +123,9 @@ class FitContext:
     usable: np.ndarray
     fit: dict[str, Any] = field(default_factory=dict)
     extra: Any = 0.0   # (F, 3) indirect shading, or 0.0
+    # the colours as recorded (False: less a coat's reflection or level a refit subtracted,
+    # whose misfit differs from face to face)
+    recorded: bool = True
 
     @property
     def plain_fit(self) -> dict[str, Any]:
