@@ -185,9 +185,10 @@ def split_regions(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edg
 # two groups of a region's faces are two albedos, not one albedo's spread, when their medians
 # along the line through them lie farther apart than the sum of the groups' 99 % ranges'
 # half-widths: this many robust standard deviations (1.4826 MAD) of each, the normal
-# distribution's two-sided 99 % quantile. The two halves 2-means makes of any unimodal spread
-# (a Gaussian: medians 1.35 standard deviations apart, each half's robust deviation 0.59 of it)
-# stay far below; two albedos each with Gaussian noise part beyond 5.2 standard deviations.
+# distribution's two-sided 99 % quantile (its 99.5 % point). The two halves 2-means makes of a
+# Gaussian spread (medians 1.35 standard deviations apart, each half's robust deviation 0.59 of
+# it) reach 0.44 of that, of a uniform one 0.52; two albedos each with Gaussian noise part
+# beyond 5.2 standard deviations. A heavily skewed spread (log-normal of sigma 2) can part.
 MODE_QUANTILE = 2.576
 
 
@@ -196,8 +197,8 @@ def split_modes(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edges
     """(F,) ``labels`` with each region split in two, and each part again, while its valid
     faces' :func:`albedo_features` fall into two modes (:func:`two_modes`) each with at least
     ``min_size`` faces inside it: faces none of whose neighbours (``edges`` (E, 2)) in the
-    region lies on the other side. -1 stays -1; regions are renumbered 0..R'-1 in order of
-    their first face.
+    region lies on the other side. -1 stays -1; a region's faces outside ``valid`` stay with
+    the side that keeps its label; regions are renumbered 0..R'-1 in order of their first face.
 
     The segmentation joins neighbours within a fixed ``segment_threshold`` of each other, far
     above the noise of a uniform region's faces; two regions whose albedos differ by less than
@@ -208,6 +209,8 @@ def split_modes(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edges
     either side (a pixel across it, a cluster of faces) can form a mode of their own, a strip
     with no face inside it: such a side is no region."""
     out = np.asarray(labels, dtype=np.int64).copy()
+    if not np.any(out >= 0):
+        return out
     side_of = np.full(len(out), -1, dtype=np.int64)   # 1 / 0: the side of the region being split
     e0, e1 = edges[:, 0], edges[:, 1]
     feat = albedo_features(np.where(valid[:, None], albedo, 1.0))
@@ -233,21 +236,25 @@ def split_modes(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edges
         count += 1
     inside = out >= 0
     _, first = np.unique(out[inside], return_index=True)
-    order = np.argsort(np.argsort(first))        # renumber by first face, as the segmentation numbers them
+    order = np.argsort(np.argsort(first))        # renumber by first face
     out[inside] = order[np.unique(out[inside], return_inverse=True)[1]]
     return out
 
 
 def two_modes(features: np.ndarray, min_size: int, iterations: int = 20) -> np.ndarray | None:
     """(n,) bool: one side of the 2-means split of ``features`` (n, C) where the two sides are
-    two modes, else None. The split starts at the median along the principal axis and moves
-    by Lloyd's steps; the sides are two modes when each holds at least ``min_size`` points and,
-    projected on the line through their medians, their medians lie more than
-    :data:`MODE_QUANTILE` x (s_1 + s_2) apart, s_k each side's robust standard deviation there."""
+    two modes, else None. The split starts at the median along the principal axis (at the mean
+    where ties leave one side empty) and moves by Lloyd's steps; the sides are two modes when
+    each holds at least ``min_size`` points and, projected on the line through their medians,
+    their medians lie more than :data:`MODE_QUANTILE` x (s_1 + s_2) apart, s_k each side's
+    robust standard deviation there. 2-means may part a large spread rather than isolate a
+    mode of few points (20 of 2,000 points 10 standard deviations off are not found)."""
     centred = features - features.mean(axis=0)
     axis = np.linalg.svd(centred, full_matrices=False)[2][0]
     projected = centred @ axis
     side = projected > np.median(projected)
+    if side.all() or not side.any():   # more than half the points tie at the median
+        side = projected > projected.mean()
     for _ in range(iterations):
         if side.all() or not side.any():
             return None

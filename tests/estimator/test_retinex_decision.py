@@ -293,3 +293,30 @@ def test_parted_regions_seeks_two_modes_only_in_the_colours_as_recorded(recorded
     assert h.regions == 2 and h.source.value == "edges and parted regions"
     assert len(np.unique(h.labels[inside & top])) == 1 and len(np.unique(h.labels[inside & ~top])) == 1
     assert h.labels[inside & top][0] != h.labels[inside & ~top][0]
+
+
+def test_only_the_first_fit_sees_the_colours_as_recorded(monkeypatch):
+    """The first fit is on the colours as recorded; the refit after the coat's level and each
+    coat's refit are on colours less a fitted term, where the parted regions' modes are not
+    sought (``recorded`` False). The coat's level is made to be found (the micro scene's is 0)."""
+    from dataclasses import replace
+
+    import estimator.methods.retinex_segmented.method as method_module
+    from estimator.methods.retinex_segmented.method import RetinexSegmented
+    from estimator.pipeline.prepared import prepare
+
+    monkeypatch.setattr(method_module, "coat_level",
+                        lambda *args: SimpleNamespace(level=np.full(3, 1e-4), gain=1.0, price=0.0))
+    calls = []
+    original = RetinexSegmented._fit
+
+    def spy(self, prep, fits, found=None, labels=None, recorded=True):
+        calls.append(recorded)
+        return original(self, prep, fits, found, labels, recorded)
+
+    monkeypatch.setattr(RetinexSegmented, "_fit", spy)
+    config = replace(micro_config(), coat_level=True)
+    data, _ = micro_scene(config)
+    info = RetinexSegmented(config).solve_held(prepare(data, config)).estimate.info
+    assert info["coat_costs"] is not None and any(info["coat_level"])   # both refits ran
+    assert calls[0] is True and len(calls) >= 3 and not any(calls[1:])

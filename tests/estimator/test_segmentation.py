@@ -107,6 +107,17 @@ def test_split_modes_parts_two_close_albedos_tied_as_one():
     assert split_modes(labels, albedo, few, mesh.face_adjacency).max() == 1
 
 
+def test_split_modes_parts_each_part_again_and_numbers_regions_by_first_face():
+    mesh = sphere(3)
+    band = np.digitize(mesh.centroids[:, 1], [-0.3, 0.3])          # three bands, 10 % steps, no noise
+    albedo = np.array([0.3, 0.45, 0.27]) * (1.1 ** band)[:, None]
+    split = split_modes(np.zeros(mesh.num_faces, dtype=np.int64), albedo, np.ones(mesh.num_faces, bool),
+                        mesh.face_adjacency)
+    assert split.max() == 2 and all(len(np.unique(split[band == b])) == 1 for b in range(3))
+    _, first = np.unique(split, return_index=True)
+    assert np.all(np.diff(first) > 0)                              # label k's first face precedes label k + 1's
+
+
 def test_split_modes_keeps_a_strip_of_blended_faces_with_no_face_inside_it():
     mesh = sphere(3)
     y = mesh.vertices[mesh.faces][:, :, 1]
@@ -141,6 +152,9 @@ def test_two_modes_keeps_one_albedo_spread_smoothly_or_with_heavy_tails():
     brighter = side if np.mean(side[: n // 4]) > 0.5 else ~side
     # 2-means parts them midway, 3 standard deviations from each: 0.13 % of either side cross
     assert np.mean(brighter[: n // 4]) > 0.99 and np.mean(brighter[n // 4:]) < 0.01
+    closer = gaussian.copy()
+    closer[: n // 4, 0] += 4 * 0.05                                # 4 standard deviations: under 2 x 2.576
+    assert two_modes(closer, 10) is None
     small = gaussian.copy()
     small[:9, 0] += 1.0                                            # 9 faces far off: below min_size
     assert two_modes(small, 10) is None

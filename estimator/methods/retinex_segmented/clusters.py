@@ -100,7 +100,8 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
     the coat's map, the radiance under that map, :func:`coat_map.diffuse_radiance`) over its
     shading under that light (its sun's shadowed column, and the light the object reflects onto it with
     ``interreflection``); where the clustered problem tied uniform regions, the regions are
-    found again on the whole mesh under that light (faces near a region in albedo join it, as in
+    found again on the whole mesh under that light (parted again where the clustered problem
+    parted them, :func:`.edges.parted_regions`; faces near a region in albedo join it, as in
     :func:`.edges.tied_regions`) and each takes its faces' median albedo."""
     c, h, model = method.config, part.hypothesis, method.model
     mesh, obs = prep.data.mesh, prep.obs

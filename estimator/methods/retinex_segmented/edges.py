@@ -84,8 +84,8 @@ def parted_regions(ctx: FitContext, tied: Hypothesis) -> Hypothesis | None:
     they fall into two modes (:func:`split_modes`: two albedos closer than the threshold); the
     light fitted once more with the parts tied; None where nothing parts. Colours less a
     coat's reflection or level carry that fit's misfit, which differs from face to face and
-    can spread one albedo's faces into modes of their own: there the first fit's regions are
-    offered as they are (:func:`kept_regions`). Whether the parts are two albedos or one
+    can spread one albedo's faces into modes of their own: there the coat's refits offer the
+    first fit's regions as they are (:func:`kept_regions`). Whether the parts are two albedos or one
     albedo the model misfits (a coat's reflection in some faces' radiance) is for the
     prediction cost to decide (:mod:`.decision`): each part's albedo is three more unknowns."""
     c = ctx.config
