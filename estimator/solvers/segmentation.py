@@ -1,5 +1,6 @@
-"""Uniform-albedo regions on the mesh: per-face diffuse radiance, albedo features and
-graph segmentation (used by the ``bilinear-segmented`` method).
+"""Uniform-albedo regions on the mesh: per-face diffuse radiance, albedo features, graph
+segmentation, and the parting of regions that hold two albedos (used by the
+``bilinear-segmented`` and ``retinex-segmented`` methods).
 
 Neighbouring faces receive nearly the same light, so where their shading-corrected
 albedos agree they belong to one region (a Retinex edge cue), whatever the hue.
