@@ -230,10 +230,9 @@ def test_a_refit_offers_the_first_fits_regions_and_the_glossy_micro_scene_gains(
     assert psnr[True] > psnr[False] + 0.3
 
 
-def test_kept_regions_ties_the_given_regions_as_they_are():
-    """Regions without a lit face are dropped and the others renumbered in order; every lit
-    face of a region takes its region's albedo."""
-    from estimator.methods.retinex_segmented.edges import kept_regions
+def _first_fit_context(recorded: bool = True):
+    """The matte micro scene's first fit (its chosen hypothesis) and a fit context on its lit
+    faces with the method's edge fit arguments; with the mesh's faces above y = 0.2 (F,)."""
     from estimator.methods.retinex_segmented.method import RetinexSegmented
     from estimator.methods.retinex_segmented.values import FitContext, ReflectionFits
     from estimator.pipeline.prepared import prepare
@@ -243,11 +242,18 @@ def test_kept_regions_ties_the_given_regions_as_they_are():
     prep = prepare(data, config)
     method = RetinexSegmented(config)
     _, first = method._fit(prep, ReflectionFits(prep.obs))
-    top = data.mesh.centroids[:, 1] > 0.2
-    labels = np.where(top, 5, 2)          # ids 2 and 5 only: 0, 1, 3, 4 empty
     ctx = FitContext(prep, config, method.model, method.loss, ReflectionFits(prep.obs), prep.edges, first.lit,
-                     dict(loss=method.loss, ridge=config.retinex_ridge, iterations=config.retinex_iterations,
-                          max_edges=config.retinex_max_edges))
+                     method._edge_fit_arguments(), recorded=recorded)
+    return first, ctx, data.mesh.centroids[:, 1] > 0.2
+
+
+def test_kept_regions_ties_the_given_regions_as_they_are():
+    """Regions without a lit face are dropped and the others renumbered in order; every lit
+    face of a region takes its region's albedo."""
+    from estimator.methods.retinex_segmented.edges import kept_regions
+
+    first, ctx, top = _first_fit_context()
+    labels = np.where(top, 5, 2)          # ids 2 and 5 only: 0, 1, 3, 4 empty
     h = kept_regions(ctx, first, labels)
     assert h.regions == 2 and h.source.value == "edges and the first fit's regions"
     lit = h.lit
@@ -268,23 +274,12 @@ def test_parted_regions_seeks_two_modes_only_in_the_colours_as_recorded(recorded
     from dataclasses import replace
 
     from estimator.methods.retinex_segmented.edges import parted_regions
-    from estimator.methods.retinex_segmented.method import RetinexSegmented
-    from estimator.methods.retinex_segmented.values import FitContext, ReflectionFits
-    from estimator.pipeline.prepared import prepare
 
-    config = micro_config()
-    data, _ = micro_scene(config, specular=0.0)
-    prep = prepare(data, config)
-    method = RetinexSegmented(config)
-    _, first = method._fit(prep, ReflectionFits(prep.obs))
-    top = data.mesh.centroids[:, 1] > 0.2
+    first, ctx, top = _first_fit_context(recorded)
     shade = first.shading.columns @ first.light
     rng = np.random.default_rng(0)
     radiance = shade * 0.5 * np.where(top, 1.06, 1.0)[:, None] * np.exp(0.005 * rng.standard_normal(shade.shape))
     tied = replace(first, radiance=radiance, labels=np.where(first.lit, 0, -1), regions=1)
-    ctx = FitContext(prep, config, method.model, method.loss, ReflectionFits(prep.obs), prep.edges, first.lit,
-                     dict(loss=method.loss, ridge=config.retinex_ridge, iterations=config.retinex_iterations,
-                          max_edges=config.retinex_max_edges), recorded=recorded)
     h = parted_regions(ctx, tied)
     if not recorded:
         assert h is None
