@@ -47,7 +47,7 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         buffers of cameras it has traced before are reused (the pose refinement passes its own).
     """
     config = config or EstimatorConfig()
-    cls = get_method(method or DEFAULT_METHOD)
+    cls = get_method(DEFAULT_METHOD if method is None else method)
     t0 = time.perf_counter()
     poses, rounds, offsets = None, config.pose_rounds, None
     if caster is not None and caster.mesh is not data.mesh:

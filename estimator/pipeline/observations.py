@@ -290,15 +290,20 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         to_cam = view.camera.center[None] - mesh.centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         parts.append((faces, means, to_cam, np.full(len(faces), index)))
-    dark = [view.name for view, valid, seen in zip(views, usable, on_mesh) if seen and not valid.any()]
+    # a view whose pixels on the mesh are below zero but for a few at exactly zero is as dark
+    dark = [view.name for view, valid, seen, n in zip(views, usable, on_mesh, rejected)
+            if seen and (not valid.any() or (n > 0 and not np.any(view.rgb.reshape(-1, 3)[valid] > 0)))]
     if dark:
-        raise InputError(f"{len(dark)} view(s) show the mesh but every pixel on it has a channel below zero: "
-                         f"{', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}; check their black level and "
-                         "sign (the images must be linear radiance) or drop them from the dataset")
+        raise InputError(f"{len(dark)} view(s) show the mesh but every pixel on it has a channel below zero "
+                         f"(or is black): {', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}; check their black "
+                         "level and sign (the images must be linear radiance) or drop them from the dataset")
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
     if len(blind) == len(views) and hit.any():
+        remedy = "lower min_pixels" if min_pixels > 1 else (
+            "each of them covers under half a pixel (a face far smaller than the pixels that see it); render larger "
+            "images or use a coarser mesh")
         raise InputError(f"no face covers min_pixels={min_pixels} pixels in any view, although pixel centres hit "
-                         f"{int(hit.sum())} faces: lower min_pixels")
+                         f"{int(hit.sum())} faces: {remedy}")
     if len(blind) == len(views):
         raise InputError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
     if blind:

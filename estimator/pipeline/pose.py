@@ -370,6 +370,24 @@ def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
             and change["translation"] <= POSE_MAX_SHIFT * np.linalg.norm(before.center - centre))
 
 
+def _settled(data: MultiViewData, start: list, views: list, reverted: np.ndarray, probe: np.ndarray, r: int,
+             rounds: int, log) -> bool:
+    """Log round ``r``'s outcome; True when rounds remain and the round moved no view (from
+    ``start`` to ``views``) by :data:`POSE_MIN_MOVE` pixels at the points ``probe`` (what the
+    finest level resolves): further rounds would repeat it."""
+    if log:
+        moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
+        log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg; "
+            f"{int(reverted.sum())} view(s) back at their pose before the round (the alignment moved their "
+            f"outline beyond {POSE_OUTLINE_TOLERANCE:g} px, and farther than it was)")
+    shift = reprojection_error([v.camera for v in start], [v.camera for v in views], probe)
+    done = r + 1 < rounds and float(np.max(shift, initial=0.0)) < POSE_MIN_MOVE
+    if done and log:
+        log(f"pose refinement: round {r + 1} moved no view by {POSE_MIN_MOVE:g} px; the remaining "
+            f"{rounds - r - 1} round(s) are skipped")
+    return done
+
+
 def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate | None], Estimate],
                  rounds: int = POSE_ROUNDS,
                  folds: int = PoseConfig.pose_folds, caster: RayCaster | None = None, log=None
@@ -398,7 +416,9 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
 
     A view whose correction grows beyond :func:`plausible` goes back to its silhouette-only
     pose, or to its given pose when that too is beyond it (and is marked 'diverged'): it was
-    pulled by a poor estimate, not by its pixels. After each round, a view whose alpha
+    pulled by a poor estimate, not by its pixels. A round that moves no view by
+    :data:`POSE_MIN_MOVE` pixels (the reprojection of the mesh's vertices; what the finest level
+    resolves) ends the refinement: the rounds after it would repeat it. After each round, a view whose alpha
     outline the round left more than :data:`POSE_OUTLINE_TOLERANCE` pixels from the mesh's,
     and farther than before the round (:func:`outline_offsets`), returns to its pose before
     the round: the alpha does not depend on the estimate, so it vetoes an alignment that a
@@ -442,6 +462,7 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
                 "estimate; only the silhouette step ran")
     estimates: list[Estimate | None] = [None] * folds
     unaligned = [0] * n
+    probe = data.mesh.vertices[:: max(1, len(data.mesh.vertices) // 1000)]   # where a round's motion is measured
     for r in range(rounds):
         start, start_offsets = list(views), offsets   # where the outline check returns a view to
         for k in range(folds):
@@ -468,11 +489,8 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
         reverted = (offsets > np.maximum(POSE_OUTLINE_TOLERANCE, start_offsets)) & ~np.array(diverged)
         for i in np.nonzero(reverted)[0]:
             views[i], offsets[i] = start[i], start_offsets[i]
-        if log:
-            moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
-            log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg; "
-                f"{int(reverted.sum())} view(s) back at their pose before the round (the alignment moved their "
-                f"outline beyond {POSE_OUTLINE_TOLERANCE:g} px, and farther than it was)")
+        if _settled(data, start, views, reverted, probe, r, rounds, log):
+            break
     info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), "diverged": bad,
              "unaligned_rounds": skipped, "outline_reverted": bool(undone),
              "outline_px": None if np.isnan(offset) else float(offset), **extra}

@@ -21,7 +21,7 @@ import numpy as np
 
 from estimator import VARIANTS, InputError, StopRequested, clear_stop, request_stop, stop_signals_handled
 from harness.cli.heap import keep_freed_memory
-from harness.io.atomic import OutputError, check_output, refuse_inputs
+from harness.io.atomic import OutputError, check_output, refuse_inputs, writable
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
 from reports.protocols import PROTOCOLS
@@ -138,7 +138,7 @@ def cmd_generate(args) -> int:
         spec = random_spec(args.seed or 0, args.profile, _overrides(args))
     else:
         spec = load_spec(resolve_scene(args.scene), args.profile, _overrides(args))
-    check_output(args.output, spec.inputs(), args.overwrite)
+    check_output(args.output, spec.inputs(), args.overwrite, kind="dataset")
     summary = generate(spec, args.output, overwrite=args.overwrite, variant=args.variant, log=_err)
     summary["peak_rss_mib"] = _peak_rss_mib()
     print(json.dumps(summary, indent=1) if args.json else
@@ -187,8 +187,9 @@ def _check_json_target(path: str, inputs: list) -> str:
     if os.path.isdir(target):
         raise OutputError(f"{path} is a folder, not a file")
     parent = os.path.dirname(target)
-    if not os.path.isdir(parent) or not os.access(parent, os.W_OK):
-        raise OutputError(f"cannot write {path}: {parent} is not a writable folder")
+    if not os.path.isdir(parent):
+        raise OutputError(f"cannot write {path}: {parent} is not a folder")
+    writable(parent, path)
     return target
 
 
@@ -236,7 +237,7 @@ def cmd_report(args) -> int:
 def cmd_compare(args) -> int:
     from harness.cli.reporting import compare_runs, print_table
 
-    check_output(args.output, args.runs, args.overwrite)
+    check_output(args.output, args.runs, args.overwrite, kind="compare")
     rows = compare_runs(args.runs, args.output, overwrite=args.overwrite)
     print_table(rows)
     print(f"comparison: {os.path.abspath(os.path.join(args.output, 'compare.html'))}")
@@ -257,7 +258,7 @@ def cmd_suite(args) -> int:
     if args.dry_run:
         return _dry_run(suite, args)
     baseline = read_rows(args.baseline) if args.baseline else None   # read before the sweep may replace it
-    check_output(os.path.join(args.output, "compare"), [suite["path"]], True)
+    check_output(os.path.join(args.output, "compare"), [suite["path"]], True, kind="compare")
     if args.executor == "dask" and args.scheduler and args.scheduler.startswith("tcp://"):
         probe_scheduler(args.scheduler)   # before anything is written
     if args.executor == "local":   # a variant this machine cannot run fails here once, not in every job
@@ -313,7 +314,7 @@ def cmd_demo(args) -> int:
 
     root = os.path.join(args.output, DEFAULT_SCENE)
     data_dir = os.path.join(root, "dataset")
-    check_output(os.path.join(root, "run"), [SCENES_DIR], True)
+    check_output(os.path.join(root, "run"), [SCENES_DIR], True, kind="run")
     t0 = time.perf_counter()
     ensure_dataset(DEFAULT_SCENE, data_dir, overwrite=args.overwrite, variant=args.variant, log=_err)
     baseline = os.path.join(SCENES_DIR, "baselines", f"{DEFAULT_SCENE}.json")
@@ -399,7 +400,8 @@ def cmd_estimate(args) -> int:
 
     check_output(args.output, [args.dataset, args.truth], args.overwrite)
     ds = read_dataset(args.dataset, load_test=False, load_truth=False)
-    check_output(args.output, [*ds.inputs, args.truth], args.overwrite)   # mesh and images may lie elsewhere
+    # the mesh and images may lie outside the dataset folder
+    check_output(args.output, [*ds.inputs, args.truth], args.overwrite, kind="run")
     flags = _config_flags(args)
     candidates = None
     if flags.get("phong_exponent") == "auto":
@@ -534,7 +536,7 @@ def cmd_export(args) -> int:
     from harness.io.dataset import read_dataset
     from harness.io.nerf_synthetic import write_nerf_synthetic
 
-    check_output(args.output, [args.dataset], args.overwrite)
+    check_output(args.output, [args.dataset], args.overwrite, kind="export")
     ds = read_dataset(args.dataset, load_test=True, load_truth=True)
     if args.format == "mitsuba":
         from harness.io.mitsuba_views import write_mitsuba_views
@@ -577,7 +579,7 @@ def cmd_import(args) -> int:
     files = [p for p in (args.file, args.mesh, args.diffuse, args.specular, args.envmap) if p]
     if args.source == "mitsuba-xml" and args.file:   # the mesh, textures and envmap the XML names are inputs too
         files += xml_referenced_files(args.file)
-    check_output(args.output, [args.dataset, *files], args.overwrite)
+    check_output(args.output, [args.dataset, *files], args.overwrite, kind="run")
     ds = read_dataset(args.dataset, load_test=False, load_truth=False)
     f = ds.data.mesh.num_faces
     if args.source in ("per-face", "mitsuba-xml") and not args.file:
@@ -651,7 +653,7 @@ def _add_estimator_flags(p) -> None:
     p.add_argument("--phong-exponent", help="Phong exponent of the defiltered/lobe models, or 'auto' to "
                                             "estimate it (lowest residual over 5..40)")
     p.add_argument("--specular-model", choices=SPECULAR_MODELS,
-                   help="mirror (the paper) or lobe (exact cut Phong lobe, needs --phong-exponent)")
+                   help="mirror (the paper) or lobe (exact cut Phong lobe of --phong-exponent: 10 unless given)")
     p.add_argument("--variant", choices=VARIANTS + ("auto",))
 
 

@@ -46,7 +46,7 @@ def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: boo
     check_output(out_dir, [run_dir, dataset_dir], overwrite)
     ds = read_dataset(dataset_dir, load_test=load_test, load_truth=load_truth)
     inputs = [run_dir, *ds.inputs]
-    check_output(out_dir, inputs, overwrite)   # the mesh and images may lie outside the dataset folder
+    check_output(out_dir, inputs, overwrite, kind="report")   # the mesh and images may lie outside the dataset folder
     if ds.data.mesh.num_faces != est.diffuse.shape[0]:
         raise InputError(f"the run {run_dir} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
                          f"{ds.data.mesh.num_faces}")

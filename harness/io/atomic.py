@@ -4,8 +4,10 @@ Rules (``check_output``), checked before any work starts and again on writing:
 
 * an output may not be, contain or lie inside any input;
 * an existing output is replaced only with ``overwrite``, and only when it is empty
-  or pseudolight wrote it (it holds the marker file :data:`MARKER`);
-* the parent folder must be creatable and writable.
+  or pseudolight wrote it as the same kind of output (the marker file :data:`MARKER` says
+  which: a run never replaces a dataset);
+* the parent folder must be creatable and writable (tried, not just asked of the
+  permissions: as root they allow what a read-only file system refuses).
 
 Writing goes to a temporary ``.NAME.pseudolight-partial-PID-XXXX`` folder beside the output,
 renamed into place when complete. The writing process holds an exclusive ``fcntl`` lock on
@@ -62,7 +64,8 @@ def refuse_inputs(out: str, inputs) -> None:
             raise OutputError(f"output {out} {relation} the input {source}; choose another -o")
 
 
-def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: bool = False) -> str:
+def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: bool = False,
+                 kind: str | None = None) -> str:
     """Refuse an output that would destroy an input or a folder pseudolight did not write.
 
     Parameters
@@ -70,6 +73,8 @@ def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: 
     path : the output folder.
     inputs : files and folders the command reads (datasets, runs, specs, assets).
     overwrite : whether an existing output may be replaced.
+    kind : what the command writes (dataset, run, report, ...; :func:`atomic_directory`'s
+        ``kind``): an existing output of another kind is never replaced. None: not checked.
 
     Returns the absolute output path. Raises :class:`OutputError` naming the folder.
     """
@@ -86,15 +91,38 @@ def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: 
         if entries and MARKER not in entries:
             raise OutputError(f"refusing to replace {out}: it was not written by pseudolight (no {MARKER}) "
                               "and is not empty; remove it yourself or choose another -o")
+        if entries and kind is not None and (held := output_kind(out)) != kind:
+            raise OutputError(f"refusing to replace {out}: it holds a pseudolight {held or 'output of unknown kind'}"
+                              f" and this command writes a {kind}; remove it yourself or choose another -o")
     parent = os.path.dirname(out)
     existing = parent
     while not os.path.exists(existing):
         existing = os.path.dirname(existing)
     if not os.path.isdir(existing):
         raise OutputError(f"cannot create {out}: {existing} is a file, not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise OutputError(f"cannot write {out}: {existing} is not writable")
+    writable(existing, out)
     return out
+
+
+def writable(folder: str, target: str) -> None:
+    """Raise :class:`OutputError` naming ``target`` unless a folder can be made in ``folder``:
+    tried, not asked of the permission bits, which allow root what a read-only file system or
+    a kernel folder refuses."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".pseudolight-probe-", dir=folder))
+    except OSError as exc:
+        raise OutputError(f"cannot write {target}: {folder} is not writable ({exc.strerror or exc})") from None
+
+
+def output_kind(folder: str) -> str | None:
+    """The kind of output pseudolight wrote in ``folder`` (its :data:`MARKER`'s ``kind``), or None
+    where the marker is missing or unreadable."""
+    try:
+        with open(os.path.join(folder, MARKER)) as f:
+            kind = json.load(f).get("kind")
+    except (OSError, ValueError, AttributeError, RecursionError):
+        return None
+    return kind if isinstance(kind, str) else None
 
 
 def _process_alive(pid: int) -> bool:
@@ -196,7 +224,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
     what it is: dataset, run, report, ...). Filesystem errors (read-only, disk
     full) become :class:`OutputError` naming ``path``, never the temporary folder.
     """
-    path = check_output(path, inputs, overwrite)
+    path = check_output(path, inputs, overwrite, kind)
     parent = os.path.dirname(path)
     try:
         os.makedirs(parent, exist_ok=True)
@@ -216,7 +244,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False, inputs: t
             if os.path.exists(path):
                 if not overwrite:  # another process wrote it meanwhile
                     raise OutputExistsError(f"{path} appeared while this output was being written")
-                check_output(path, inputs, overwrite=True)
+                check_output(path, inputs, overwrite=True, kind=kind)
                 trash = tempfile.mkdtemp(prefix=f".{os.path.basename(path)}.pseudolight-old-{os.getpid()}-",
                                          dir=parent)
                 os.replace(path, os.path.join(trash, "old"))

@@ -136,7 +136,7 @@ def _number(where: str, key: str, value) -> float:
     except OverflowError:
         number = None
     if number is None or not np.isfinite(number):
-        raise DatasetError(f"{where}: intrinsic '{key}' must be a finite number, got {str(value)[:40]}")
+        raise DatasetError(f"{where}: intrinsic '{key}' must be a finite number, got {repr(value)[:40]}")
     return number
 
 

@@ -63,8 +63,10 @@ def estimator_settings(meta: dict, method: str | None = None, overrides: dict | 
             get_method(default_method)
     except InputError as exc:
         raise InputError(f"transforms.json estimator_defaults: {exc}") from None
+    if method is not None:
+        get_method(method)   # an empty or unknown name is refused, not taken for the default
     chosen.update(overrides or {})
-    return method or default_method, EstimatorConfig(**chosen)
+    return default_method if method is None else method, EstimatorConfig(**chosen)
 
 
 def versions() -> dict:

@@ -53,8 +53,14 @@ def test_a_view_whose_pixels_on_the_mesh_are_all_negative_is_named():
     good = View("good", CAM, np.full((12, 16, 3), 0.5))
     flipped = View("flipped", CAM, np.full((12, 16, 3), -0.5))
     data = MultiViewData(sphere(1), [good, flipped])
-    with pytest.raises(ValueError, match="1 view.s. show the mesh but every pixel on it has a channel below zero: "
-                                         "flipped"):
+    with pytest.raises(ValueError, match=r"1 view.s. show the mesh but every pixel on it has a channel below zero "
+                                         r"\(or is black\): flipped"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+    # a few pixels at exactly zero among the negative ones: still a sign error, not a pose error
+    rgb = np.full((12, 16, 3), -0.5)
+    rgb[6, 8] = 0.0
+    data = MultiViewData(sphere(1), [good, View("flipped", CAM, rgb)])
+    with pytest.raises(ValueError, match=r"every pixel on it has a channel below zero \(or is black\): flipped"):
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 

@@ -108,6 +108,43 @@ def test_overwrite_replaces_only_what_pseudolight_wrote(copy, tmp_path, capsys):
     capsys.readouterr()
 
 
+def test_overwrite_never_replaces_another_kind_of_output(copy, micro, tmp_path, capsys):
+    """A dataset (or a report) pseudolight wrote is not a run: --overwrite of a run there is
+    refused before the estimate starts, and the folder keeps every file."""
+    ds, run, rep = copy
+    other = tmp_path / "other-dataset"
+    shutil.copytree(micro[0], other)
+    expect_error(capsys, ["estimate", ds, "-o", other, "--overwrite"], "holds a pseudolight dataset",
+                 "writes a run", str(other), inputs=[ds, other])
+    expect_error(capsys, ["estimate", ds, "-o", rep, "--overwrite"], "holds a pseudolight report", inputs=[ds, rep])
+    expect_error(capsys, ["report", run, "-o", other, "--overwrite", "--no-mitsuba"], "holds a pseudolight dataset",
+                 "writes a report", inputs=[run, ds, other])
+
+
+def test_an_output_in_a_folder_that_refuses_writes_is_refused_before_the_work(copy, tmp_path, capsys, monkeypatch):
+    """The parent folder is tried, not judged by its permission bits (root passes those where a
+    read-only file system refuses): the estimate and a report's --write-baseline fail at once."""
+    import harness.io.atomic as atomic
+
+    ds, run, _ = copy
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real = atomic.tempfile.mkdtemp
+
+    def refuse(*args, **kwargs):
+        if str(kwargs.get("dir", "")) == str(locked):
+            raise PermissionError(1, "Operation not permitted")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(atomic.tempfile, "mkdtemp", refuse)
+    monkeypatch.setattr("estimator.estimate", lambda *a, **k: pytest.fail("the estimate ran before the check"))
+    expect_error(capsys, ["estimate", ds, "-o", locked / "run"], "cannot write", "not writable", inputs=[ds],
+                 absent=[locked / "run"])
+    report = tmp_path / "report2"
+    expect_error(capsys, ["report", run, "-o", report, "--no-mitsuba", "--write-baseline", locked / "b.json"],
+                 "cannot write", str(locked / "b.json"), inputs=[run, ds], absent=[report, locked / "b.json"])
+
+
 # ------------------------------------------------------------ silent garbage
 
 def test_non_finite_estimate_is_refused_and_nan_is_a_regression(copy, capsys):
@@ -1063,3 +1100,25 @@ def test_an_empty_output_path_and_a_zero_field_of_view_are_one_line(copy, tmp_pa
     with np.errstate(all="raise"):   # no numpy warning line before the error
         expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "camera_angle_x must lie in (0, pi)",
                      inputs=[ds], absent=[tmp_path / "r"])
+
+
+# ---------------------------------------------------------------- third hostile-input run
+
+def test_an_empty_method_name_is_refused_not_taken_for_the_default(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r", "--method", ""], "unknown method ''",
+                 inputs=[ds], absent=[tmp_path / "r"])
+
+
+def test_json_nested_too_deeply_is_named_not_a_traceback(copy, tmp_path, capsys):
+    """Python's JSON parser recurses once per level: 100,000 nested brackets would raise
+    RecursionError; the readers say the file is not valid JSON."""
+    ds, run, _ = copy
+    deep = "[" * 100_000 + "]" * 100_000
+    baseline = tmp_path / "deep.json"
+    baseline.write_text(deep)
+    expect_error(capsys, ["report", run, "-o", tmp_path / "rep", "--no-mitsuba", "--baseline", baseline],
+                 str(baseline), "not valid JSON", "nested too deeply", inputs=[run, ds], absent=[tmp_path / "rep"])
+    (ds / "transforms.json").write_text(deep)
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "transforms.json", "nested too deeply",
+                 inputs=[ds], absent=[tmp_path / "r"])

@@ -320,3 +320,24 @@ def test_a_solve_started_from_a_prior_skips_its_start_and_reaches_the_same_estim
     np.testing.assert_allclose(warm.specular[seen], cold.specular[seen], rtol=2e-3, atol=1e-6)
     mismatched = get_method("bilinear-per-face")(EstimatorConfig(components="specular", sh_order=4), prior=prior)
     assert mismatched._prior_light() is None   # another order's light is no start
+
+
+def test_rounds_stop_once_a_round_moves_no_view(tiny_earth_data, monkeypatch):
+    """A round whose alignments leave every camera where it was (here each returns its view's
+    own camera) ends the refinement: 1000 rounds asked for cost one round's held-out estimates,
+    and the log says the rest were skipped."""
+    import estimator.pipeline.pose as pose
+
+    data = tiny_earth_data.data
+    monkeypatch.setattr(pose, "refine_view", lambda view, predictor, *a, **k: (view.camera, {"pixels": 0,
+                                                                                           "cost": [0.0, 0.0]}))
+    solved, lines = [], []
+
+    def solve(d, prior):
+        solved.append(len(d.views))
+        return estimate(d, "median-color", dataclasses.replace(EARTH, pose_rounds=0, auto_pose=0.0))
+
+    refined, info = pose.refine_poses(data, solve, rounds=1000, folds=3, log=lines.append)
+    assert len(solved) == 3                      # one round: one estimate per view group
+    assert any("999 round(s) are skipped" in line for line in lines)
+    assert [v.camera.c2w.tolist() for v in refined.views] == [p["c2w"] for p in info]
