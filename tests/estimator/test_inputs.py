@@ -64,6 +64,17 @@ def test_a_view_whose_pixels_on_the_mesh_are_all_negative_is_named():
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
 
 
+def test_cameras_inside_the_mesh_are_named_as_a_scale_mismatch_not_the_winding():
+    """A mesh in other units (here 100x) around the cameras: every face is seen from behind, as
+    with a reversed winding, but the message names the scale (reversing the winding there
+    would silently estimate garbage)."""
+    mesh = sphere(1)
+    huge = TriangleMesh(mesh.vertices * 100.0, mesh.faces)
+    data = MultiViewData(huge, [View("v", CAM, np.ones((12, 16, 3)))])
+    with pytest.raises(ValueError, match="1 of the 1 cameras lie inside the mesh's bounding box.*same units"):
+        estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+
+
 def test_a_mesh_wound_inwards_is_named():
     """Normals pointing inwards: every visible face is seen from behind, and the error says
     the winding is reversed rather than blaming the poses or min_cos_view."""
