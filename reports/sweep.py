@@ -96,6 +96,8 @@ def read_rows(path: str) -> list[dict]:
             data = json.load(f)
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: not a readable sweep.json ({exc})") from None
+    except RecursionError:   # Python's parser recurses once per nesting level
+        raise InputError(f"{path}: not a readable sweep.json (its JSON is nested too deeply)") from None
     rows = data.get("rows") if isinstance(data, dict) else None
     if not isinstance(rows, list) or not all(isinstance(r, dict) and {"scene", "label", "seed", "axes"} <= set(r)
                                              for r in rows):

@@ -290,9 +290,9 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         to_cam = view.camera.center[None] - mesh.centroids[faces]
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         parts.append((faces, means, to_cam, np.full(len(faces), index)))
-    # a view whose pixels on the mesh are below zero but for a few at exactly zero is as dark
+    # a view whose pixels on the mesh are mostly below zero, the rest exactly zero, is as dark
     dark = [view.name for view, valid, seen, n in zip(views, usable, on_mesh, rejected)
-            if seen and (not valid.any() or (n > 0 and not np.any(view.rgb.reshape(-1, 3)[valid] > 0)))]
+            if seen and (not valid.any() or (n > valid.sum() and not np.any(view.rgb.reshape(-1, 3)[valid] > 0)))]
     if dark:
         raise InputError(f"{len(dark)} view(s) show the mesh but every pixel on it has a channel below zero "
                          f"(or is black): {', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}; check their black "
@@ -300,8 +300,8 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
     if len(blind) == len(views) and hit.any():
         remedy = "lower min_pixels" if min_pixels > 1 else (
-            "each of them covers under half a pixel (a face far smaller than the pixels that see it); render larger "
-            "images or use a coarser mesh")
+            "none of their pixels yields an observation (faces far smaller than the pixels, or seen only at the "
+            "silhouette); check the mesh against the images")
         raise InputError(f"no face covers min_pixels={min_pixels} pixels in any view, although pixel centres hit "
                          f"{int(hit.sum())} faces: {remedy}")
     if len(blind) == len(views):

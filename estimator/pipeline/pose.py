@@ -37,6 +37,7 @@ from ..solvers.robust import TUNING, irls_weights, robust_scale
 POSE_SCALES = (8.0, 4.0, 2.0, 1.0)
 SILHOUETTE_SCALES = (16.0, 8.0, 4.0, 2.0)   # the first, silhouette-only move
 POSE_ROUNDS = 2          # alignment rounds against held-out estimates
+POSE_MAX_ROUNDS = 20     # the most a user may ask for
 POSE_STEPS = 10          # Gauss-Newton steps per level
 POSE_MAX_DEGREES = 10.0  # a correction beyond this turn, or beyond POSE_MAX_SHIFT x the distance to
 POSE_MAX_SHIFT = 0.25    # the mesh, is a divergence (against a poor estimate), not a calibration error
@@ -78,7 +79,8 @@ class PoseConfig(Section):
 
     def check(self):
         return [
-            (self.pose_rounds >= 0, "pose_rounds must be >= 0"),
+            (0 <= self.pose_rounds <= POSE_MAX_ROUNDS, f"pose_rounds must lie in [0, {POSE_MAX_ROUNDS}] (each round "
+             "is pose_folds held-out estimates; the rounds end early once one moves no view)"),
             (self.auto_pose >= 0, "auto_pose must be >= 0 (0: never)"),
             (self.pose_folds >= 2, "pose_folds must be >= 2 (a view group is aligned against an estimate "
                                    "from the other views)"),
@@ -370,22 +372,26 @@ def plausible(before: Camera, after: Camera, centre: np.ndarray) -> bool:
             and change["translation"] <= POSE_MAX_SHIFT * np.linalg.norm(before.center - centre))
 
 
-def _settled(data: MultiViewData, start: list, views: list, reverted: np.ndarray, probe: np.ndarray, r: int,
-             rounds: int, log) -> bool:
-    """Log round ``r``'s outcome; True when rounds remain and the round moved no view (from
-    ``start`` to ``views``) by :data:`POSE_MIN_MOVE` pixels at the points ``probe`` (what the
-    finest level resolves): further rounds would repeat it."""
-    if log:
-        moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
-        log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg; "
-            f"{int(reverted.sum())} view(s) back at their pose before the round (the alignment moved their "
-            f"outline beyond {POSE_OUTLINE_TOLERANCE:g} px, and farther than it was)")
+def _settled(start: list, views: list, probe: np.ndarray) -> bool:
+    """Whether a round moved no view (from ``start`` to ``views``) by :data:`POSE_MIN_MOVE`
+    pixels at the points ``probe`` (N, 3): what the finest level resolves, so a further round
+    would repeat this one."""
     shift = reprojection_error([v.camera for v in start], [v.camera for v in views], probe)
-    done = r + 1 < rounds and float(np.max(shift, initial=0.0)) < POSE_MIN_MOVE
-    if done and log:
+    return float(np.max(shift, initial=0.0)) < POSE_MIN_MOVE
+
+
+def _log_round(log, data: MultiViewData, views: list, reverted: np.ndarray, r: int, rounds: int,
+               settled: bool) -> None:
+    """Round ``r``'s line (and, when it ``settled`` with rounds left, that they are skipped)."""
+    if not log:
+        return
+    moved = [pose_change(a.camera, b.camera)["rotation_deg"] for a, b in zip(data.views, views)]
+    log(f"pose refinement round {r + 1}/{rounds}: median correction {np.median(moved):.3f} deg; "
+        f"{int(reverted.sum())} view(s) back at their pose before the round (the alignment moved their "
+        f"outline beyond {POSE_OUTLINE_TOLERANCE:g} px, and farther than it was)")
+    if settled and r + 1 < rounds:
         log(f"pose refinement: round {r + 1} moved no view by {POSE_MIN_MOVE:g} px; the remaining "
             f"{rounds - r - 1} round(s) are skipped")
-    return done
 
 
 def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate | None], Estimate],
@@ -489,7 +495,9 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
         reverted = (offsets > np.maximum(POSE_OUTLINE_TOLERANCE, start_offsets)) & ~np.array(diverged)
         for i in np.nonzero(reverted)[0]:
             views[i], offsets[i] = start[i], start_offsets[i]
-        if _settled(data, start, views, reverted, probe, r, rounds, log):
+        settled = _settled(start, views, probe)
+        _log_round(log, data, views, reverted, r, rounds, settled)
+        if settled:
             break
     info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), "diverged": bad,
              "unaligned_rounds": skipped, "outline_reverted": bool(undone),

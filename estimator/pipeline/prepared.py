@@ -275,19 +275,18 @@ def prepare(data: MultiViewData, config: PrepareConfig, log=None, method: str | 
     # the first surface a camera ray hits faces the camera, so on a mesh wound outwards the
     # front-facing pairs outnumber the back-facing ones (an open mesh shows a few insides)
     behind = int(np.sum(cos_view < 0))
-    centres = np.array([v.camera.center for v in data.views])
-    low, high = data.mesh.vertices.min(axis=0), data.mesh.vertices.max(axis=0)
-    within = int(np.sum(np.all((centres > low) & (centres < high), axis=1)))
-    if behind > len(cos_view) - behind and 2 * within > len(centres):
-        # cameras inside the mesh also see its faces from behind: a scale or unit mismatch, not the winding
-        raise InputError(f"{within} of the {len(centres)} cameras lie inside the mesh's bounding box, and {behind} of "
-                         f"the {len(cos_view)} observed (face, view) pairs see their face from behind: the mesh and "
-                         "the cameras are not in the same units or place (check the mesh's scale and the "
-                         "transform_matrix translations)")
     if behind > len(cos_view) - behind:
+        centres = np.array([v.camera.center for v in data.views])
+        low, high = data.mesh.vertices.min(axis=0), data.mesh.vertices.max(axis=0)
+        within = int(np.sum(np.all((centres > low) & (centres < high), axis=1)))
+        # cameras inside a mesh in other units see its faces from behind too; a ground plane or an
+        # open mesh may hold cameras in its bounds, so both causes are named
+        scale = (f"; or, as {within} of the {len(centres)} cameras lie inside the mesh's bounding box, the mesh and "
+                 "the cameras may be in different units or places: check the mesh's scale before reversing the "
+                 "winding") if within else ""
         raise InputError(f"{behind} of the {len(cos_view)} observed (face, view) pairs see their face from behind its "
                          "normal: the mesh's faces are wound the other way (normals point inwards); reverse the "
-                         "winding, e.g. trimesh's mesh.invert()")
+                         f"winding, e.g. trimesh's mesh.invert(){scale}")
     obs = all_obs.subset(cos_view > config.min_cos_view)
     if len(obs.face) == 0:
         raise InputError(f"no observation passes min_cos_view={config.min_cos_view}")

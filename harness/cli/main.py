@@ -493,7 +493,7 @@ def cmd_render(args) -> int:
 
     rotation = _rotation("--rotate-illumination", args.rotate_illumination)
     est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite,
-                                  check_fingerprint=not args.no_fingerprint_check)
+                                  check_fingerprint=not args.no_fingerprint_check, kind="render")
     views = {"test": ds.data.test_views, "train": ds.data.views,
              "all": ds.data.views + ds.data.test_views}[args.frames]
     if not views:
@@ -522,7 +522,7 @@ def cmd_export_texture(args) -> int:
     from harness.io.texture import export_textures
 
     est, _, ds, inputs = open_run(args.run, args.dataset, args.output, args.overwrite, load_test=False,
-                                  check_fingerprint=not args.no_fingerprint_check)
+                                  check_fingerprint=not args.no_fingerprint_check, kind="texture")
     _, uv = load_mesh_with_uv(os.path.join(ds.path, ds.meta.get("mesh_file_path", "mesh.ply")))
     with atomic_directory(args.output, overwrite=args.overwrite, inputs=inputs, kind="texture") as tmp:
         summary = export_textures(tmp, ds.data.mesh, est, uv, args.size)

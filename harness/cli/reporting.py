@@ -34,19 +34,21 @@ from reports.selfcheck import self_check
 
 
 def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: bool, load_test: bool = True,
-             load_truth: bool = False, match: tuple[str, ...] = ("mesh",), check_fingerprint: bool = True):
+             load_truth: bool = False, match: tuple[str, ...] = ("mesh",), check_fingerprint: bool = True,
+             kind: str = "report"):
     """(estimate, run.json, dataset, inputs) of a run and the dataset it is read against
     (default: the one it was made from), after checking that ``out_dir`` touches none of
     their files and that the run was estimated from this dataset's ``match`` (of the run's
     fingerprint: 'mesh', 'cameras', 'images'; a mesh with the same face count but another face
     order would put each albedo on the wrong face). A run without a fingerprint is refused
-    unless ``check_fingerprint`` is False (``--no-fingerprint-check``)."""
+    unless ``check_fingerprint`` is False (``--no-fingerprint-check``). ``kind``: what the
+    command writes to ``out_dir`` (:func:`harness.io.atomic.check_output`)."""
     est, run = read_run(run_dir)
     dataset_dir = dataset_dir or run["dataset"]
     check_output(out_dir, [run_dir, dataset_dir], overwrite)
     ds = read_dataset(dataset_dir, load_test=load_test, load_truth=load_truth)
     inputs = [run_dir, *ds.inputs]
-    check_output(out_dir, inputs, overwrite, kind="report")   # the mesh and images may lie outside the dataset folder
+    check_output(out_dir, inputs, overwrite, kind=kind)   # the mesh and images may lie outside the dataset folder
     if ds.data.mesh.num_faces != est.diffuse.shape[0]:
         raise InputError(f"the run {run_dir} has {est.diffuse.shape[0]} faces, the mesh of {ds.path} "
                          f"{ds.data.mesh.num_faces}")

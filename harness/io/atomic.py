@@ -92,8 +92,9 @@ def check_output(path: str | os.PathLike, inputs: tuple | list = (), overwrite: 
             raise OutputError(f"refusing to replace {out}: it was not written by pseudolight (no {MARKER}) "
                               "and is not empty; remove it yourself or choose another -o")
         if entries and kind is not None and (held := output_kind(out)) != kind:
-            raise OutputError(f"refusing to replace {out}: it holds a pseudolight {held or 'output of unknown kind'}"
-                              f" and this command writes a {kind}; remove it yourself or choose another -o")
+            what = f"kind {held!r}" if held else f"unknown kind (its {MARKER} is unreadable)"
+            raise OutputError(f"refusing to replace {out}: it holds pseudolight output of {what} and this command "
+                              f"writes kind {kind!r}; remove it yourself or choose another -o")
     parent = os.path.dirname(out)
     existing = parent
     while not os.path.exists(existing):
@@ -108,8 +109,8 @@ def writable(folder: str, target: str) -> None:
     """Raise :class:`OutputError` naming ``target`` unless a folder can be made in ``folder``:
     tried, not asked of the permission bits, which allow root what a read-only file system or
     a kernel folder refuses."""
-    try:
-        os.rmdir(tempfile.mkdtemp(prefix=".pseudolight-probe-", dir=folder))
+    try:   # named as a partial folder: one left by a killed process is cleaned like any other
+        os.rmdir(tempfile.mkdtemp(prefix=f".probe.pseudolight-partial-{os.getpid()}-", dir=folder))
     except OSError as exc:
         raise OutputError(f"cannot write {target}: {folder} is not writable ({exc.strerror or exc})") from None
 

@@ -53,7 +53,7 @@ def load_json(path: str, what: str, error: type[InputError] = InputError) -> dic
     except (ValueError, UnicodeDecodeError) as exc:
         raise error(f"{path} is not valid JSON ({what}): {exc}") from None
     except RecursionError:   # Python's parser recurses once per nesting level
-        raise error(f"{path} is not valid JSON ({what}): nested too deeply") from None
+        raise error(f"{path} cannot be read ({what}): its JSON is nested too deeply") from None
     except OSError as exc:
         raise error(f"cannot read {path} ({what}): {exc.strerror or exc}") from None
     if not isinstance(value, dict):

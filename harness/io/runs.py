@@ -50,7 +50,8 @@ def estimator_settings(meta: dict, method: str | None = None, overrides: dict | 
     if not isinstance(defaults, dict):
         raise InputError(f"transforms.json estimator_defaults must be an object, got {defaults!r}")
     chosen = dict(defaults)
-    default_method = chosen.pop("method", None) or DEFAULT_METHOD
+    default_method = chosen.pop("method", None)
+    default_method = DEFAULT_METHOD if default_method is None else default_method   # "" is refused below
     if not isinstance(default_method, str):
         raise InputError(f"transforms.json estimator_defaults.method must be a string, got {default_method!r}")
     known = {f.name for f in dataclasses.fields(EstimatorConfig)}

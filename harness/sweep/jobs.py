@@ -51,7 +51,7 @@ def finished(folder: str, job_id: str, figures: bool = True) -> dict | None:
     try:
         with open(path) as f:
             record = json.load(f)
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):   # unreadable: the job runs again
         return None
     if not isinstance(record, dict) or record.get("id") != job_id:
         return None

@@ -62,17 +62,27 @@ def test_a_view_whose_pixels_on_the_mesh_are_all_negative_is_named():
     data = MultiViewData(sphere(1), [good, View("flipped", CAM, rgb)])
     with pytest.raises(ValueError, match=r"every pixel on it has a channel below zero \(or is black\): flipped"):
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+    # a black view (its side unlit) with one pixel a little below zero is no sign error
+    black = np.zeros((12, 16, 3))
+    black[6, 8] = -1e-3
+    estimate(MultiViewData(sphere(1), [good, View("unlit", CAM, black)]), "median-color",
+             EstimatorConfig(sh_order=2, directions=50))
 
 
-def test_cameras_inside_the_mesh_are_named_as_a_scale_mismatch_not_the_winding():
+def test_cameras_inside_the_mesh_name_its_scale_beside_the_winding():
     """A mesh in other units (here 100x) around the cameras: every face is seen from behind, as
-    with a reversed winding, but the message names the scale (reversing the winding there
-    would silently estimate garbage)."""
+    with a reversed winding; the message names the scale too (reversing the winding there
+    would silently estimate garbage). Cameras outside the bounds hear of the winding alone."""
     mesh = sphere(1)
     huge = TriangleMesh(mesh.vertices * 100.0, mesh.faces)
     data = MultiViewData(huge, [View("v", CAM, np.ones((12, 16, 3)))])
-    with pytest.raises(ValueError, match="1 of the 1 cameras lie inside the mesh's bounding box.*same units"):
+    with pytest.raises(ValueError, match="reverse the winding.*1 of the 1 cameras lie inside the mesh's bounding "
+                                         "box.*different units"):
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+    inward = TriangleMesh(mesh.vertices, mesh.faces[:, ::-1])
+    with pytest.raises(ValueError, match=r"mesh.invert\(\)$"):
+        estimate(MultiViewData(inward, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
+                 EstimatorConfig(sh_order=2, directions=50))
 
 
 def test_a_mesh_wound_inwards_is_named():

@@ -114,11 +114,19 @@ def test_overwrite_never_replaces_another_kind_of_output(copy, micro, tmp_path, 
     ds, run, rep = copy
     other = tmp_path / "other-dataset"
     shutil.copytree(micro[0], other)
-    expect_error(capsys, ["estimate", ds, "-o", other, "--overwrite"], "holds a pseudolight dataset",
-                 "writes a run", str(other), inputs=[ds, other])
-    expect_error(capsys, ["estimate", ds, "-o", rep, "--overwrite"], "holds a pseudolight report", inputs=[ds, rep])
-    expect_error(capsys, ["report", run, "-o", other, "--overwrite", "--no-mitsuba"], "holds a pseudolight dataset",
-                 "writes a report", inputs=[run, ds, other])
+    expect_error(capsys, ["estimate", ds, "-o", other, "--overwrite"], "holds pseudolight output of kind 'dataset'",
+                 "writes kind 'run'", str(other), inputs=[ds, other])
+    expect_error(capsys, ["estimate", ds, "-o", rep, "--overwrite"], "of kind 'report'", inputs=[ds, rep])
+    expect_error(capsys, ["report", run, "-o", other, "--overwrite", "--no-mitsuba"], "of kind 'dataset'",
+                 "writes kind 'report'", inputs=[run, ds, other])
+    (other / MARKER).write_text("{not json")
+    expect_error(capsys, ["estimate", ds, "-o", other, "--overwrite"], "unknown kind", MARKER, inputs=[ds, other])
+    # each command replaces its own earlier output
+    for argv in (["render", run, "-o", tmp_path / "rendered", "--frames", "test"],
+                 ["export-texture", run, "-o", tmp_path / "texture"]):
+        assert main([str(a) for a in argv]) == 0
+        assert main([str(a) for a in argv] + ["--overwrite"]) == 0, capsys.readouterr().err
+    capsys.readouterr()
 
 
 def test_an_output_in_a_folder_that_refuses_writes_is_refused_before_the_work(copy, tmp_path, capsys, monkeypatch):
@@ -132,7 +140,7 @@ def test_an_output_in_a_folder_that_refuses_writes_is_refused_before_the_work(co
     real = atomic.tempfile.mkdtemp
 
     def refuse(*args, **kwargs):
-        if str(kwargs.get("dir", "")) == str(locked):
+        if os.path.realpath(str(kwargs.get("dir", ""))) == os.path.realpath(locked):
             raise PermissionError(1, "Operation not permitted")
         return real(*args, **kwargs)
 
@@ -1118,7 +1126,7 @@ def test_json_nested_too_deeply_is_named_not_a_traceback(copy, tmp_path, capsys)
     baseline = tmp_path / "deep.json"
     baseline.write_text(deep)
     expect_error(capsys, ["report", run, "-o", tmp_path / "rep", "--no-mitsuba", "--baseline", baseline],
-                 str(baseline), "not valid JSON", "nested too deeply", inputs=[run, ds], absent=[tmp_path / "rep"])
+                 str(baseline), "cannot be read", "nested too deeply", inputs=[run, ds], absent=[tmp_path / "rep"])
     (ds / "transforms.json").write_text(deep)
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "transforms.json", "nested too deeply",
                  inputs=[ds], absent=[tmp_path / "r"])
