@@ -237,6 +237,11 @@ def cmd_report(args) -> int:
 def cmd_compare(args) -> int:
     from harness.cli.reporting import compare_runs, print_table
 
+    seen: dict[str, str] = {}
+    for run in args.runs:   # one folder twice compares nothing
+        if (real := os.path.realpath(run)) in seen:
+            raise InputError(f"{run} is given twice (as {seen[real]} too); compare distinct runs or reports")
+        seen[real] = run
     check_output(args.output, args.runs, args.overwrite, kind="compare")
     rows = compare_runs(args.runs, args.output, overwrite=args.overwrite)
     print_table(rows)
@@ -536,6 +541,8 @@ def cmd_export(args) -> int:
     from harness.io.dataset import read_dataset
     from harness.io.nerf_synthetic import write_nerf_synthetic
 
+    if args.format == "nerf-synthetic" and args.spp is not None:
+        raise InputError("--spp applies to --format mitsuba (nerf-synthetic copies the dataset's rendered images)")
     check_output(args.output, [args.dataset], args.overwrite, kind="export")
     ds = read_dataset(args.dataset, load_test=True, load_truth=True)
     if args.format == "mitsuba":

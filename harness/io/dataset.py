@@ -379,6 +379,8 @@ def read_dataset(folder: str | os.PathLike, load_test: bool = True, load_truth: 
     frames = top.get("frames", [])
     if not frames:
         raise DatasetError(f"{tpath} has no frames")
+    if not isinstance(top.get("test_frames", []), list):   # refused before an estimate that does not read them
+        raise DatasetError(f"{tpath}: test_frames must be a list of frames, got {type(top['test_frames']).__name__}")
     _check_distinct_frames(tpath, frames, top.get("test_frames", []))
     files = [mesh_path]
     views = _read_views(folder, frames, top, "frames", files)

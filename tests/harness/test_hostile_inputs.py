@@ -1130,3 +1130,20 @@ def test_json_nested_too_deeply_is_named_not_a_traceback(copy, tmp_path, capsys)
     (ds / "transforms.json").write_text(deep)
     expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "transforms.json", "nested too deeply",
                  inputs=[ds], absent=[tmp_path / "r"])
+
+
+def test_flags_a_command_would_ignore_and_one_run_compared_with_itself_are_refused(copy, tmp_path, capsys):
+    ds, run, rep = copy
+    expect_error(capsys, ["export", ds, "-o", tmp_path / "nerf", "--spp", "16"], "--spp applies to --format mitsuba",
+                 inputs=[ds], absent=[tmp_path / "nerf"])
+    expect_error(capsys, ["compare", run, str(run) + "/", "-o", tmp_path / "cmp"], "is given twice",
+                 inputs=[run], absent=[tmp_path / "cmp"])
+
+
+def test_test_frames_that_are_no_list_are_refused_before_the_estimate(copy, tmp_path, capsys):
+    ds, _, _ = copy
+    t = json.load(open(ds / "transforms.json"))
+    t["test_frames"] = {"file_path": "images/test_000.exr"}
+    json.dump(t, open(ds / "transforms.json", "w"))
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "test_frames must be a list", inputs=[ds],
+                 absent=[tmp_path / "r"])
