@@ -99,6 +99,8 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         f"poses refined automatically ({pose.POSE_ROUNDS} rounds): the alpha outline of "
         f"{data.views[int(np.nanargmax(offsets))].name} lay {np.nanmax(offsets):.1f} px from the mesh's "
         f"(auto_pose {config.auto_pose:g} px); the corrected cameras are in 'poses'"]
+    off = sorted((p for p in poses or [] if (p["outline_px"] or 0.0) > pose.POSE_OUTLINE_TOLERANCE),
+                 key=lambda p: -p["outline_px"])
     unaligned = [p["name"] for p in poses or [] if p["unaligned_rounds"]]
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + [
@@ -111,7 +113,11 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         f"pose refinement: the last alignment of {len(undone)} view(s) moved their alpha outline more than "
         f"{pose.POSE_OUTLINE_TOLERANCE:g} px off the mesh's, and farther than before, so it was undone and they keep "
         f"their pose from before it ({', '.join(undone[:5])}{' ...' if len(undone) > 5 else ''}; 'outline_reverted' "
-        "in 'poses'): the estimate predicts these views poorly"] if undone else [])
+        "in 'poses'): the estimate predicts these views poorly"] if undone else []) + ([
+        f"after pose refinement the alpha outline of {len(off)} view(s) still lies more than "
+        f"{pose.POSE_OUTLINE_TOLERANCE:g} px from the mesh's ({off[0]['name']}: {off[0]['outline_px']:.1f} px; "
+        "'outline_px' in 'poses'): no camera motion explains their silhouettes, so check the intrinsics (focal "
+        "length, principal point) and the mesh's scale against the images"] if off else [])
     return est
 
 

@@ -341,3 +341,22 @@ def test_rounds_stop_once_a_round_moves_no_view(tiny_earth_data, monkeypatch):
     assert len(solved) == 3                      # one round: one estimate per view group
     assert any("999 round(s) are skipped" in line for line in lines)
     assert [v.camera.c2w.tolist() for v in refined.views] == [p["c2w"] for p in info]
+
+
+def test_silhouettes_no_pose_explains_are_named_after_refinement(tiny_earth_data):
+    """Focal lengths 3x the true ones: a camera moved 3x farther would match the outline, but
+    that is beyond a calibration error (POSE_MAX_SHIFT), so the views keep poses whose outline
+    stays off; the estimate says so and names the intrinsics and the mesh's scale."""
+    from estimator.pipeline.pose import POSE_OUTLINE_TOLERANCE
+
+    data = tiny_earth_data.data
+    wrong = dataclasses.replace(data, views=[
+        dataclasses.replace(v, camera=dataclasses.replace(v.camera, fx=3 * v.camera.fx, fy=3 * v.camera.fy))
+        for v in data.views])
+    est = estimate(wrong, "median-color", dataclasses.replace(EARTH, pose_rounds=1))
+    worst = max(p["outline_px"] for p in est.info["poses"])
+    assert worst > POSE_OUTLINE_TOLERANCE
+    assert any("still lies more than" in w and "intrinsics" in w and f"{worst:.1f} px" in w
+               for w in est.info["warnings"])
+    clean = estimate(data, "median-color", dataclasses.replace(EARTH, pose_rounds=1))
+    assert not any("still lies more than" in w for w in clean.info["warnings"])
