@@ -116,7 +116,7 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         "in 'poses'): the estimate predicts these views poorly"] if undone else []) + ([
         f"after pose refinement the alpha outline of {len(off)} view(s) still lies more than "
         f"{pose.POSE_OUTLINE_TOLERANCE:g} px from the mesh's ({off[0]['name']}: {off[0]['outline_px']:.1f} px; "
-        "'outline_px' in 'poses'): no camera motion explains their silhouettes, so check the intrinsics (focal "
+        "'outline_px' in 'poses'): the refinement matched no pose to their silhouettes; check the intrinsics (focal "
         "length, principal point) and the mesh's scale against the images"] if off else [])
     return est
 
