@@ -103,7 +103,9 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
                  key=lambda p: -p["outline_px"])
     unaligned = [p["name"] for p in poses or [] if p["unaligned_rounds"]]
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
-    est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + [
+    flat, repeated = data.mesh.degenerate_faces()
+    est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + _mesh_warnings(
+        flat, repeated) + [
         f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]] + ([
@@ -119,6 +121,18 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         "'outline_px' in 'poses'): the refinement matched no pose to their silhouettes; check the intrinsics (focal "
         "length, principal point) and the mesh's scale against the images"] if off else [])
     return est
+
+
+def _mesh_warnings(flat: np.ndarray, repeated: np.ndarray) -> list[str]:
+    """Warnings for the mesh's faces of zero area and repeated faces ((F,) bool each)."""
+    out = []
+    if flat.any():
+        out.append(f"{int(flat.sum())} face(s) of the mesh have zero area (first: {int(np.argmax(flat))}): they "
+                   "have no normal, are never observed and stay unestimated")
+    if repeated.any():
+        out.append(f"{int(repeated.sum())} face(s) of the mesh repeat the vertices of an earlier face (first: "
+                   f"{int(np.argmax(repeated))}): the rays hit one of each pair, so the other stays unestimated")
+    return out
 
 
 def _fit(data: MultiViewData, cls, config: EstimatorConfig, known_sh, known_radiance, log, exponent_candidates,

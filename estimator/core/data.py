@@ -96,6 +96,20 @@ class TriangleMesh:
         c = self.corners
         return 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
 
+    def degenerate_faces(self) -> tuple[np.ndarray, np.ndarray]:
+        """((F,) bool, (F,) bool): faces of zero area (no normal: never observed), and faces
+        whose three vertices an earlier face already uses (a repeat, which the rays hit in its
+        place)."""
+        flat = self.areas == 0
+        ordered = np.sort(self.faces, axis=1).astype(np.int64)
+        n = len(self.vertices)
+        # one int64 key per face where it fits (a row-wise unique sorts 10x slower)
+        keys = (ordered[:, 0] * n + ordered[:, 1]) * n + ordered[:, 2] if n < 2_000_000 else ordered
+        _, first = np.unique(keys, axis=0, return_index=True)
+        repeated = np.ones(self.num_faces, dtype=bool)
+        repeated[first] = False
+        return flat, repeated
+
 
 @dataclass(frozen=True)
 class View:

@@ -85,6 +85,22 @@ def test_cameras_inside_the_mesh_name_its_scale_beside_the_winding():
                  EstimatorConfig(sh_order=2, directions=50))
 
 
+def test_faces_of_zero_area_and_repeated_faces_are_named_in_warnings():
+    mesh = sphere(1)
+    faces = np.vstack([mesh.faces, mesh.faces[:2], [[0, 0, 1]]])   # two repeats, then a face of zero area
+    odd = TriangleMesh(mesh.vertices, faces)
+    flat, repeated = odd.degenerate_faces()
+    assert np.flatnonzero(flat).tolist() == [len(faces) - 1]
+    assert np.flatnonzero(repeated).tolist() == [len(mesh.faces), len(mesh.faces) + 1]
+    est = estimate(MultiViewData(odd, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
+                   EstimatorConfig(sh_order=2, directions=50))
+    assert any(f"1 face(s) of the mesh have zero area (first: {len(faces) - 1})" in w for w in est.info["warnings"])
+    assert any("2 face(s) of the mesh repeat" in w for w in est.info["warnings"])
+    clean = estimate(MultiViewData(mesh, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
+                     EstimatorConfig(sh_order=2, directions=50))
+    assert not any("of the mesh" in w for w in clean.info["warnings"])
+
+
 def test_a_mesh_wound_inwards_is_named():
     """Normals pointing inwards: every visible face is seen from behind, and the error says
     the winding is reversed rather than blaming the poses or min_cos_view."""
