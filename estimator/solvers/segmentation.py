@@ -236,9 +236,8 @@ def split_modes(labels: np.ndarray, albedo: np.ndarray, valid: np.ndarray, edges
         todo += [region, count]
         count += 1
     inside = out >= 0
-    _, first = np.unique(out[inside], return_index=True)
-    order = np.argsort(np.argsort(first))        # renumber by first face
-    out[inside] = order[np.unique(out[inside], return_inverse=True)[1]]
+    _, first, inverse = np.unique(out[inside], return_index=True, return_inverse=True)
+    out[inside] = np.argsort(np.argsort(first))[inverse]   # renumbered by first face
     return out
 
 
