@@ -219,7 +219,7 @@ def regression_table(rows: list[dict]) -> str:
     out = ["<table><tr><th>metric</th><th>baseline</th><th>now</th><th>tolerance</th><th>status</th></tr>"]
     for r in rows:
         cls = "ok" if r["status"] == "ok" else "bad"
-        now = "missing" if r["current"] is None else f"{r['current']:.4g}"
+        now = html.escape(r.get("note") or "missing") if r["current"] is None else f"{r['current']:.4g}"
         out.append(f"<tr><td>{html.escape(r['metric'])}</td><td>{r['baseline']:.4g}</td><td>{now}</td>"
                    f"<td>{r['direction']} is better, ±{r['tolerance']:g}</td><td class='{cls}'>{r['status']}</td></tr>")
     return "\n".join(out + ["</table>"])

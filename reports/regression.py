@@ -1,6 +1,7 @@
 """Regression checks of metrics against a stored baseline, with per-metric tolerances."""
 from __future__ import annotations
 
+import difflib
 import math
 
 from estimator import InputError
@@ -74,12 +75,47 @@ def validate_baseline(baseline, source: str = "baseline") -> dict:
     return baseline
 
 
+def metric_paths(metrics: dict, prefix: str = "") -> list[str]:
+    """The dotted paths of every number in a metrics dict (nested tables), e.g.
+    'albedo.diffuse.psnr_lstsq'."""
+    out = []
+    for key, value in metrics.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.extend(metric_paths(value, path + "."))
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            out.append(path)
+    return out
+
+
+def unknown_metric(metrics: dict, path: str) -> str | None:
+    """None where the report names ``path`` (its value may still be missing: a metric the
+    run could not compute), else why it is not a metric of the report: with the closest name it
+    has or tracks, so a typo in a hand-written baseline reads as one. A tracked metric is never
+    unknown: a report may lack it (``--no-mitsuba`` computes no cross-check)."""
+    if path in TRACKED:
+        return None
+    node = metrics
+    for key in path.split("."):
+        if not isinstance(node, dict) or key not in node:
+            break
+        node = node[key]
+    else:
+        return None
+    known = sorted(set(metric_paths(metrics)) | set(TRACKED))   # path is in neither
+    close = difflib.get_close_matches(path, known, n=1, cutoff=0.8)
+    return "not a metric of this report" + (f"; did you mean {close[0]!r}?" if close else "")
+
+
 def check(metrics: dict, baseline: dict) -> list[dict]:
     """Compare every metric of the baseline; a row per metric with status 'ok', 'worse' or 'missing'.
 
     A metric is worse when it moved in the bad direction by more than its
     tolerance (the baseline's own, else :data:`TRACKED`'s); missing when the
-    current metrics lack it or it is not a finite number (a NaN never passes).
+    current metrics lack it or it is not a finite number (a NaN never passes). A missing
+    metric whose name the report does not hold at all carries ``note``
+    (:func:`unknown_metric`: a typo in the baseline, with the closest name); it still fails
+    the check, since the report cannot show the baseline's figure holds.
     """
     validate_baseline(baseline)
     rows = []
@@ -92,6 +128,10 @@ def check(metrics: dict, baseline: dict) -> list[dict]:
         else:
             change = (current - base) if better == "higher" else (base - current)
             status = "worse" if change < -tol else "ok"
-        rows.append({"metric": path, "baseline": float(base), "current": None if current is None else float(current),
-                     "direction": better, "tolerance": float(tol), "status": status})
+        row = {"metric": path, "baseline": float(base), "current": None if current is None else float(current),
+               "direction": better, "tolerance": float(tol), "status": status}
+        note = unknown_metric(metrics, path) if status == "missing" else None
+        if note:
+            row["note"] = note
+        rows.append(row)
     return rows

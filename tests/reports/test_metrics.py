@@ -115,6 +115,21 @@ def test_regression_passes_equal_and_fails_worse():
         check(_metrics(), {})
 
 
+def test_a_baseline_metric_the_report_does_not_name_is_named_with_the_closest_metric():
+    """A typo in a hand-written baseline still fails the check (the report cannot show the
+    baseline's figure holds), but says so, with the closest metric; a metric the report names
+    without a value (one the run could not compute) carries no such note."""
+    base = {"metrics": {"clusters.arii": 0.9, "clusters.ari": 0.9, "nothing.like.it": 1.0}}
+    missing = _metrics()
+    missing["clusters"]["ari"] = None
+    rows = {r["metric"]: r for r in check(missing, base)}
+    assert all(r["status"] == "missing" for r in rows.values())
+    assert rows["clusters.arii"]["note"] == "not a metric of this report; did you mean 'clusters.ari'?"
+    assert rows["nothing.like.it"]["note"] == "not a metric of this report"
+    assert "note" not in rows["clusters.ari"]
+    assert "note" not in {r["metric"]: r for r in check(_metrics(), {"metrics": {"clusters.ari": 0.9}})}["clusters.ari"]
+
+
 def test_adjusted_rand_index_known_values():
     a = np.array([0, 0, 1, 1, 2, 2])
     assert metrics.adjusted_rand_index(a, a) == 1.0

@@ -56,7 +56,10 @@ def test_baseline_regression_exit_codes(tiny_report, capsys):
     # a metric the baseline tracks but the report lacks counts as a regression
     skip = tiny_report / "skip"
     assert main(["report", str(run), "-o", str(skip), "--no-mitsuba", "--no-figures", "--baseline", str(base)]) == 1
-    assert "mitsuba_cross_check.relative_l2_noise_free" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # a tracked metric the report lacks is no typo: no suggestion
+    assert "REGRESSION mitsuba_cross_check.relative_l2_noise_free: baseline" in err
+    assert "now missing or not a finite number" in err and "did you mean" not in err
     # --no-figures: the same metrics, no PNG, and a page that says so
     full, bare = (json.load(open(folder / "metrics.json")) for folder in (tiny_report / "report", skip))
     assert bare["albedo"] == full["albedo"] and bare["novel_views"]["psnr_srgb"] == full["novel_views"]["psnr_srgb"]
@@ -64,12 +67,15 @@ def test_baseline_regression_exit_codes(tiny_report, capsys):
     worse = json.load(open(base))
     worse["metrics"]["albedo.specular.dc.luminance.within_10"] = 1.5  # impossible to reach
     worse["metrics"].pop("mitsuba_cross_check.relative_l2_noise_free", None)
+    worse["metrics"]["albedo.diffuse.psnr_lstq"] = 10.0   # a typo in a hand-written baseline
     json.dump(worse, open(tiny_report / "worse.json", "w"))
     capsys.readouterr()
     assert main(["report", str(run), "-o", str(tiny_report / "third"), "--no-mitsuba", "--protocol", "raw",
                  "--baseline", str(tiny_report / "worse.json")]) == 1
     err = capsys.readouterr().err
     assert "REGRESSION albedo.specular.dc.luminance.within_10" in err
+    assert ("REGRESSION albedo.diffuse.psnr_lstq: baseline 10, now not a metric of this report; "
+            "did you mean 'albedo.diffuse.psnr_lstsq'?") in err
     third = json.load(open(tiny_report / "third" / "metrics.json"))
     assert list(third["novel_views"]["protocols"]) == ["raw"]
 
