@@ -172,7 +172,7 @@ def _regression_exit(rows: list[dict], what: str) -> int:
     :func:`reports.sweep.regressions`) and a summary; exit code 1 when any is worse."""
     worse = [r for r in rows if r["status"] != "ok"]
     for r in worse:
-        now = r.get("note") or "missing or not a finite number" if r["current"] is None else f"{r['current']:.4g}"
+        now = (r.get("note") or "missing or not a finite number") if r["current"] is None else f"{r['current']:.4g}"
         where = f"{r['row']} " if "row" in r else ""
         _err(f"REGRESSION {where}{r['metric']}: baseline {r['baseline']:.4g}, now {now} "
              f"({r['direction']} is better, tolerance {r['tolerance']:g})")
