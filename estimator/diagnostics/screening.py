@@ -19,8 +19,9 @@ Five reasons, each a property of the data or of physics, none fitted to a scene:
   reject the albedo its region gave it (a face joined to a region by its neighbours, whose
   colour is another region's).
 * ``left out by the method``: the face has observations in kept views, but the method gave
-  it no albedo (``bilinear-clustered`` leaves out faces darker in every view than
-  ``min_brightness`` times the bright faces', as in a point light's shadow). Counted so that
+  it no albedo (``bilinear-clustered`` leaves out faces whose median colour over the views is
+  below ``min_brightness`` times the 95th percentile of the faces' medians, as in a point
+  light's shadow). Counted so that
   the warning states every face without an estimate that a view shows.
 """
 from __future__ import annotations

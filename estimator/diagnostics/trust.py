@@ -18,7 +18,7 @@ from ..pipeline.prepared import ROW_CHUNK, Prepared
 from ..solvers.robust import exposure_level, relative_residuals, robust_scale
 
 OUTLIER_SIGMAS = 3.0        # a row is an outlier beyond this many robust scales
-MIN_OUTLIER_SCALE = 0.01    # ... and beyond 1 % of its face's colour (noise-free data)
+MIN_OUTLIER_SCALE = 0.01    # ... the scale taken as at least 1 % of the exposure level (noise-free data)
 GROSS_RESIDUAL = 0.2        # a gross error: residual above 20 % of the exposure level
 OUTLIER_VIEW_SHARE = 0.05   # a view is an outlier when this share of its rows are gross errors ...
 OUTLIER_VIEW_FACTOR = 5.0   # ... and this many times the median view's share ...

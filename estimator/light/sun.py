@@ -15,8 +15,10 @@ column of the diffuse matrix (whose rows carry the same 1 / pi), so its coeffici
 sun's irradiance in the SH light's units: E Y_lm(d) is the sun as SH. Its
 direction d is found by a pattern search on the robust cost of the edge fit, started at
 the brightest direction of the SH light and run at a low order (the sun's shadows, not the
-sky's detail, decide it). The sun is kept only when it lowers that cost by at least
-``min_gain`` (a fraction), so a probe with no sun keeps the SH light alone.
+sky's detail, decide it). The sun is kept when the drop it brings to the edges' Cauchy
+negative log-likelihood exceeds its Bayesian information criterion's price
+(:attr:`Sun.explains`) and it lowers that cost by at least ``sun_min_gain`` (a fraction, 0 by
+default: the criterion alone), so a probe with no sun keeps the SH light alone.
 """
 from __future__ import annotations
 

@@ -61,7 +61,7 @@ class BilinearClustered(Method):
         c = self.config
         med = prep.all_obs.median_color()
         brightness = np.nan_to_num(med).mean(axis=1)
-        # faces that stay dark in every view carry no colour: they are not estimated
+        # faces dark in most views (their median colour) carry no colour: they are not estimated
         observed = ~np.isnan(med[:, 0]) & (brightness > c.min_brightness * np.percentile(brightness, 95))
         seen = np.nonzero(observed)[0]
         face_group = np.zeros(len(med), dtype=np.int64)

@@ -19,7 +19,8 @@ class BilinearConfig(Section):
 
     Attributes
     ----------
-    iterations, tol : ALS iteration cap and relative residual-change stop.
+    iterations, tol : cap on the Levenberg-Marquardt steps and their relative cost-change stop
+        (the alternating least squares before them take a fixed five steps).
     components : 'both', 'specular' (t_d = 0, the earth experiment) or 'diffuse'.
     lm_damping_start, lm_damping_raise, lm_damping_lower, lm_damping_max : the
         Levenberg-Marquardt schedule: initial damping, factor on a rejected step, divisor

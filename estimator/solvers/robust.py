@@ -30,7 +30,8 @@ class RobustConfig(Section):
 
     Attributes
     ----------
-    robust_loss : M-estimator on residuals relative to the face's median colour ('none':
+    robust_loss : M-estimator on colour residuals relative to the exposure level (the 90th
+        percentile of the observations' colour norms, :func:`exposure_level`) ('none':
         least squares, the paper; 'huber', 'cauchy' or 'tukey'; 'auto': the method's own
         ``default_loss``).
     robust_rounds : reweighting rounds (each one more bilinear solve).

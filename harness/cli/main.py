@@ -24,6 +24,7 @@ from harness.cli.heap import keep_freed_memory
 from harness.io.atomic import OutputError, check_output, refuse_inputs, writable
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
+from harness.sweep.executor import EXECUTORS
 from reports.protocols import PROTOCOLS
 
 DEFAULT_SCENE = "earth-specular"
@@ -688,7 +689,7 @@ def _add_suite_parser(sub, name: str) -> None:
                     help="redo every job (finished jobs are otherwise reused)")
     su.add_argument("--jobs", type=_int_at_least(1, MAX_JOBS), default=1,
                     help=f"worker processes (spawned; Dr.Jit threads split between them), 1 to {MAX_JOBS}")
-    su.add_argument("--executor", choices=("local", "dask"), default="local")
+    su.add_argument("--executor", choices=EXECUTORS, default="local")
     su.add_argument("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (--executor dask)")
     su.add_argument("--variant", choices=VARIANTS)
     su.add_argument("--baseline", help="a previous sweep's compare/sweep.json: a regression verdict per row and "

@@ -72,3 +72,24 @@ def test_a_bad_value_is_refused_naming_the_setting(settings, named):
 def test_an_int_is_taken_for_a_float_and_stored_as_float():
     config = EstimatorConfig(phong_exponent=20)
     assert config.phong_exponent == 20.0 and isinstance(config.phong_exponent, float)
+
+
+def test_the_docs_table_of_settings_matches_the_code():
+    """docs/estimator.md lists every setting with its default and the section (and file)
+    that owns it: a setting added, renamed, moved or given another default shows here."""
+    import inspect
+    import os
+    import re
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    with open(os.path.join(root, "docs", "estimator.md"), encoding="utf-8") as f:
+        rows = re.findall(r"^\| `(\w+)` \| `([^`]*)` \| `(\w+)` \(`([^`]+)`\) \|$", f.read(), re.MULTILINE)
+    documented = {name: (default, section, path) for name, default, section, path in rows}
+    expected = {}
+    for section in SECTIONS:
+        path = os.path.relpath(inspect.getsourcefile(section), root).replace(os.sep, "/")
+        alone = section()
+        for name in section.__dict__.get("__annotations__", {}):
+            expected[name] = (repr(getattr(alone, name)), section.__name__, path)
+    assert len(rows) == len(documented), "a setting is listed twice"
+    assert documented == expected
