@@ -76,14 +76,14 @@ def validate_baseline(baseline, source: str = "baseline") -> dict:
 
 
 def metric_paths(metrics: dict, prefix: str = "") -> list[str]:
-    """The dotted paths of every number in a metrics dict (nested tables), e.g.
-    'albedo.diffuse.psnr_lstsq'."""
+    """The dotted paths of every metric in a metrics dict (nested tables), e.g.
+    'albedo.diffuse.psnr_lstsq': each number, and each None (a metric the run could not compute)."""
     out = []
     for key, value in metrics.items():
         path = f"{prefix}{key}"
         if isinstance(value, dict):
             out.extend(metric_paths(value, path + "."))
-        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        elif value is None or (isinstance(value, (int, float)) and not isinstance(value, bool)):
             out.append(path)
     return out
 
@@ -93,17 +93,10 @@ def unknown_metric(metrics: dict, path: str) -> str | None:
     run could not compute), else why it is not a metric of the report: with the closest name it
     has or tracks, so a typo in a hand-written baseline reads as one. A tracked metric is never
     unknown: a report may lack it (``--no-mitsuba`` computes no cross-check)."""
-    if path in TRACKED:
+    known = set(metric_paths(metrics)) | set(TRACKED)
+    if path in known:
         return None
-    node = metrics
-    for key in path.split("."):
-        if not isinstance(node, dict) or key not in node:
-            break
-        node = node[key]
-    else:
-        return None
-    known = sorted(set(metric_paths(metrics)) | set(TRACKED))   # path is in neither
-    close = difflib.get_close_matches(path, known, n=1, cutoff=0.8)
+    close = difflib.get_close_matches(path, sorted(known), n=1, cutoff=0.8)
     return "not a metric of this report" + (f"; did you mean {close[0]!r}?" if close else "")
 
 
