@@ -94,12 +94,14 @@ class Method(ABC):
             result = self._weighted_solve(prep, face_group, num_groups, fixed_light, weights, self._prior_light())
             result.weights = base
             return result
-        w = base * self._initial_weights(prep)
+        warm = self._prior_weights(prep, base) if self.config.robust_rounds > 0 and fixed_light is None else None
+        w = base * (self._initial_weights(prep) if warm is None else warm)
+        rounds = self.config.robust_rounds - (warm is not None)
         result = None
-        for round_ in range(self.config.robust_rounds + 1):
+        for round_ in range(rounds + 1):
             result = self._weighted_solve(prep, face_group, num_groups, fixed_light, w,
                                           self._prior_light() if result is None else result.light)
-            if round_ < self.config.robust_rounds:
+            if round_ < rounds:
                 w = base * self._reweight(prep, face_group, result, base)
         result.weights = w
         return result
@@ -115,6 +117,28 @@ class Method(ABC):
     def loss(self) -> str:
         """The robust loss in use: ``config.robust_loss``, or the method's own for 'auto'."""
         return self.default_loss if self.config.robust_loss == "auto" else self.config.robust_loss
+
+    def _prior_weights(self, prep: Prepared, base: np.ndarray) -> np.ndarray | None:
+        """(N,) the robust weights of every row under the prior estimate (its albedos and
+        light), where it has this model's light and estimated the rows' faces; None without
+        one. A prior from other views of the same object has been through the reweighting
+        already, so its weights stand in for the first round's (a warm start of the
+        reweighting: one bilinear solve fewer). Rows of faces the prior left unestimated get
+        the glint clipping of :meth:`_initial_weights`."""
+        light = self._prior_light()
+        if light is None or self.prior.diffuse.shape[0] != prep.obs.num_faces:
+            return None
+        obs = prep.obs
+        known = self.prior.observed[obs.face] & np.all(np.isfinite(self.prior.diffuse[obs.face])
+                                                       & np.isfinite(self.prior.specular[obs.face]), axis=1)
+        if not known.any():
+            return None
+        diffuse = np.where(known[:, None], self.prior.diffuse[obs.face], 0.0)
+        specular = np.where(known[:, None], self.prior.specular[obs.face], 0.0)
+        predicted = self.model.predict(diffuse, specular, prep.c_rows @ light, prep.d_rows @ light)
+        r = robust.relative_residuals(obs.rgb, predicted)
+        weights = robust.irls_weights(r, self.loss, robust.robust_scale(r[known], base[known]))
+        return np.where(known, weights, self._initial_weights(prep))
 
     def _initial_weights(self, prep: Prepared) -> np.ndarray:
         """(N,) glint clipping before the first robust solve (ones without a robust loss)."""
