@@ -56,18 +56,24 @@ class TriangleMesh:
         """(F, 3, 3): the three vertex positions of each face."""
         return self.vertices[self.faces]
 
-    @property
+    @cached_property
     def centroids(self) -> np.ndarray:
-        """(F, 3) face centroids."""
-        return self.corners.mean(axis=1)
+        """(F, 3) face centroids; computed once per mesh (every view's rows and rays start
+        there) and read-only."""
+        centroids = self.corners.mean(axis=1)
+        centroids.setflags(write=False)
+        return centroids
 
-    @property
+    @cached_property
     def face_normals(self) -> np.ndarray:
-        """(F, 3) unit geometric normals (counter-clockwise winding)."""
+        """(F, 3) unit geometric normals (counter-clockwise winding); computed once per mesh
+        and read-only."""
         c = self.corners
         n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
         length = np.linalg.norm(n, axis=1, keepdims=True)
-        return n / np.where(length > 0, length, 1.0)
+        normals = n / np.where(length > 0, length, 1.0)
+        normals.setflags(write=False)
+        return normals
 
     @cached_property
     def face_adjacency(self) -> np.ndarray:

@@ -166,17 +166,16 @@ def _blur(image: np.ndarray, sigma: float) -> tuple[np.ndarray, int]:
     return gaussian_filter(image, sigma=(rest, rest, 0), mode="constant"), f
 
 
-def _align(observed: np.ndarray, factor: int, template: np.ndarray, points_world: np.ndarray, camera: Camera,
-           steps: int, free: np.ndarray, fallback: Camera | None = None,
+def _align(observed: np.ndarray, gradients: np.ndarray, factor: int, template: np.ndarray,
+           points_world: np.ndarray, camera: Camera, steps: int, free: np.ndarray, fallback: Camera | None = None,
            min_move: float = POSE_MIN_MOVE) -> tuple[Camera, float, float]:
     """Damped Gauss-Newton alignment at one level of the parameters where ``free`` (6,) bool
     is set, from ``camera`` or from ``fallback`` when that fits this level better (so the
-    result never fits worse than either); ``observed`` is the level's image at 1/``factor``
-    of the camera's resolution (:func:`_blur`). It stops after ``steps`` steps, or when a step
-    lowers the cost by less than :data:`POSE_MIN_GAIN` or moves no point by more than
-    ``min_move`` pixels. Returns (camera, cost before, cost after)."""
-    grad_row, grad_col = np.gradient(observed, axis=(0, 1))
-    gradients = np.concatenate([grad_col, grad_row], axis=2) / factor   # (H', W', 2C) per camera pixel
+    result never fits worse than either); ``observed`` (H', W', C) is the level's image at
+    1/``factor`` of the camera's resolution and ``gradients`` (H', W', 2C) its column then row
+    derivatives per camera pixel (:class:`ObservedLevels`). It stops after ``steps`` steps, or
+    when a step lowers the cost by less than :data:`POSE_MIN_GAIN` or moves no point by more
+    than ``min_move`` pixels. Returns (camera, cost before, cost after)."""
     channels = observed.shape[2]
     scale = max(float(np.median(np.abs(template))), 1e-6)
 
@@ -234,6 +233,54 @@ def _align(observed: np.ndarray, factor: int, template: np.ndarray, points_world
     return cam, first, current
 
 
+def _gradients(image: np.ndarray, factor: int) -> np.ndarray:
+    """(H', W', 2C) column then row derivatives of a level's ``image`` (H', W', C) held at
+    1/``factor`` of the camera's resolution, per camera pixel."""
+    grad_row, grad_col = np.gradient(image, axis=(0, 1))
+    return np.concatenate([grad_col, grad_row], axis=2) / factor
+
+
+class ObservedLevels:
+    """One view's observed image and alpha blurred at each level (:func:`_blur`), with their
+    gradients, made on first use and kept: the images do not change between the rounds of a
+    pose refinement, only the camera, and the blur and the gradients are linear, so the
+    silhouette channel's weight (the colours' level, which the prediction sets) scales the
+    kept alpha level instead of being blurred anew.
+
+    Attributes
+    ----------
+    colour : (H, W, 3) the view's colours times its alpha (the object alone).
+    alpha : (H, W) or None, the view's :func:`silhouette`.
+    """
+
+    def __init__(self, view: View):
+        self.alpha = silhouette(view)
+        self.colour = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
+        self._levels: dict[tuple[str, float], tuple[np.ndarray, np.ndarray, int]] = {}
+
+    def _level(self, part: str, sigma: float) -> tuple[np.ndarray, np.ndarray, int]:
+        key = (part, sigma)
+        if key not in self._levels:
+            image = self.colour if part == "colour" else self.alpha[..., None]
+            blurred, factor = _blur(image, sigma)
+            self._levels[key] = blurred, _gradients(blurred, factor), factor
+        return self._levels[key]
+
+    def level(self, sigma: float, colour: bool, silhouette_weight: float) -> tuple[np.ndarray, np.ndarray, int]:
+        """(image (H', W', C), gradients (H', W', 2C), factor) at the level ``sigma``: the
+        colours (``colour``) then, with an alpha, the silhouette times ``silhouette_weight``."""
+        parts = ([self._level("colour", sigma)] if colour else []) + (
+            [] if self.alpha is None else [self._level("alpha", sigma)])
+        weights = [1.0] * colour + [silhouette_weight] * (self.alpha is not None)
+        if len(parts) == 1 and weights[0] == 1.0:
+            return parts[0]
+        image = np.concatenate([w * p[0] for w, p in zip(weights, parts)], axis=2)
+        channels = [p[0].shape[2] for p in parts]
+        gradients = np.concatenate([w * p[1][..., k * c:(k + 1) * c] for k in (0, 1)
+                                    for w, p, c in zip(weights, parts, channels)], axis=2)
+        return image, gradients, parts[0][2]
+
+
 def _fill_unestimated(predicted: np.ndarray, known: np.ndarray, mesh: np.ndarray, sigma: float) -> np.ndarray:
     """``predicted`` (H, W, C) with its mesh pixels that have no estimate (``mesh`` (H, W, 1)
     bool and not ``known`` (H, W, 1) bool) set to the Gaussian-weighted mean (``sigma``
@@ -252,16 +299,17 @@ def _fill_unestimated(predicted: np.ndarray, known: np.ndarray, mesh: np.ndarray
 
 
 def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales: tuple[float, ...],
-            steps: int, free: np.ndarray, estimated: np.ndarray | None = None) -> tuple[Camera, dict]:
+            steps: int, free: np.ndarray, estimated: np.ndarray | None = None,
+            observed: ObservedLevels | None = None) -> tuple[Camera, dict]:
     """One view's camera aligned from coarse to fine: the ``predicted`` image (H, W, 3) of
     the view at its camera and the silhouette against the image and its alpha, or the
     silhouette alone (``predicted`` None). ``estimated`` (F,) bool: the faces whose predicted
     radiance is known; pixels on the others are not aligned (their prediction is black), and
     their prediction is filled from the known pixels around them before the blur
-    (:func:`_fill_unestimated`)."""
+    (:func:`_fill_unestimated`). ``observed``: the view's kept levels (None: made here)."""
     cam = view.camera
     info = {"pixels": 0, "cost": [0.0, 0.0]}
-    alpha = silhouette(view)
+    observed = observed or ObservedLevels(view)
     # the surface points and their predicted radiance, at the starting pose: a pose error of a
     # few pixels barely changes what a point looks like, only where it lands
     face, surface = caster.pixel_hits(cam)
@@ -269,17 +317,16 @@ def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales:
     coverage = (face >= 0).reshape(cam.height, cam.width, 1).astype(np.float32)
     if estimated is not None:   # a face without an estimate has no predicted radiance to align with
         face = np.where(estimated[np.maximum(face, 0)], face, -1)
-    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predicted is None and alpha is None):
+    if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predicted is None and observed.alpha is None):
         return cam, info
-    if predicted is None:
-        predicted, seen = coverage, alpha[..., None]
+    level, colour = 1.0, predicted is not None
+    if not colour:
+        predicted = coverage
     else:
         predicted = _fill_unestimated(predicted, (face >= 0).reshape(coverage.shape), coverage > 0, max(scales))
-        seen = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
-        if alpha is not None:   # the silhouette as one more channel, at the colours' level
+        if observed.alpha is not None:   # the silhouette as one more channel, at the colours' level
             level = float(np.median(np.linalg.norm(predicted.reshape(-1, 3)[face >= 0], axis=1)))
             predicted = np.concatenate([predicted, level * coverage], axis=2)
-            seen = np.concatenate([seen, level * alpha[..., None]], axis=2)
     rows, cols = np.divmod(np.arange(len(face)), cam.width)
     # a regular grid of pixels: a blurred level needs fewer samples, and none needs more than
     # POSE_MAX_POINTS
@@ -292,7 +339,8 @@ def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales:
         blurred, factor = _blur(predicted, sigma)
         template = _sample(blurred, (np.stack([cols[covered], rows[covered]], axis=1) + 0.5) / factor)
         finest = k == len(scales) - 1   # the result must fit at least as well as the given pose
-        cam, before, after = _align(*_blur(seen, sigma), template, surface[covered], cam, steps, free,
+        image, gradients, factor = observed.level(sigma, colour, level)
+        cam, before, after = _align(image, gradients, factor, template, surface[covered], cam, steps, free,
                                     view.camera if finest else None, POSE_MIN_MOVE * sigma)
         info["pixels"], info["cost"] = int(len(covered)), [before, after]
     return cam, info
@@ -307,8 +355,9 @@ def silhouette(view: View) -> np.ndarray | None:
 
 
 def refine_view(view: View, predictor: Predictor, scales: tuple[float, ...] = POSE_SCALES,
-                steps: int = POSE_STEPS) -> tuple[Camera, dict]:
-    """One view's camera (all 6 degrees of freedom) aligned with ``predictor``'s image of it.
+                steps: int = POSE_STEPS, observed: ObservedLevels | None = None) -> tuple[Camera, dict]:
+    """One view's camera (all 6 degrees of freedom) aligned with ``predictor``'s image of it;
+    ``observed``: the view's kept levels, where a caller aligns it again (None: made here).
 
     Returns
     -------
@@ -316,16 +365,16 @@ def refine_view(view: View, predictor: Predictor, scales: tuple[float, ...] = PO
     info : dict with 'pixels' used and 'cost' (robust cost before and after, finest level).
     """
     return _refine(view, predictor.caster, predictor.predict(view.camera)[0], scales, steps, np.ones(6, dtype=bool),
-                   predictor.estimate.observed)
+                   predictor.estimate.observed, observed)
 
 
 def centre_view(view: View, caster: RayCaster, scales: tuple[float, ...] = SILHOUETTE_SCALES,
-                steps: int = POSE_STEPS) -> Camera:
+                steps: int = POSE_STEPS, observed: ObservedLevels | None = None) -> Camera:
     """One view's camera moved (no turn) so the mesh's silhouette matches the view's alpha:
     the pose error that shifts the whole object, found without any estimate. Views without
-    alpha keep their camera."""
+    alpha keep their camera. ``observed``: the view's kept levels (None: made here)."""
     free = np.array([False, False, False, True, True, True])
-    return _refine(view, caster, None, scales, steps, free)[0]
+    return _refine(view, caster, None, scales, steps, free, observed=observed)[0]
 
 
 def pose_change(before: Camera, after: Camera) -> dict:
@@ -453,9 +502,10 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
                          f"against an estimate from the others); got {folds}")
     caster = caster or RayCaster(data.mesh)
     centre = data.mesh.bounds_centre
+    observed = [ObservedLevels(v) for v in data.views]   # the images' levels, kept across the rounds
     centred = []
-    for v in data.views:
-        cam = centre_view(v, caster)
+    for v, levels in zip(data.views, observed):
+        cam = centre_view(v, caster, observed=levels)
         centred.append(dataclasses.replace(v, camera=cam if plausible(v.camera, cam, centre) else v.camera))
     views, diverged = list(centred), [False] * n
     offsets = outline_offsets(dataclasses.replace(data, views=centred), caster)   # NaN without alpha
@@ -486,7 +536,7 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
             estimates[k] = estimate
             predictor = Predictor(data.mesh, estimate, caster)
             for i in held:
-                cam, last[i] = refine_view(views[i], predictor)
+                cam, last[i] = refine_view(views[i], predictor, observed=observed[i])
                 diverged[i] = not plausible(data.views[i].camera, cam, centre)
                 views[i] = centred[i] if diverged[i] else dataclasses.replace(views[i], camera=cam)
         offsets = outline_offsets(dataclasses.replace(data, views=views), caster)
