@@ -53,11 +53,10 @@ class Predictor:
         coverage : (H, W) float32, 1 where the pixel centre sees the mesh.
         """
         est = self.estimate
-        _, dirs = camera.pixel_rays()
         face = self.caster.face_id_buffer(camera).ravel()
         hit = np.nonzero(face >= 0)[0]
         f = face[hit]
-        mirror = mirror_directions(self.mesh.face_normals[f], -dirs[hit])
+        mirror = mirror_directions(self.mesh.face_normals[f], -camera.subpixel_directions(hit, 1).T)
         light = self.light(rotation)
         value = self.model.predict(est.diffuse[f], est.specular[f], (self.c_matrix @ light)[f],
                                    self.model.specular_shading(f, mirror, self.sampling, self.visibility, light))

@@ -117,13 +117,19 @@ def projection_jacobian(points: np.ndarray, pivot: np.ndarray, fx: float, fy: fl
     (N, 2, 6): columns omega (radians) then t (world units), rows (column, row) pixels.
     """
     x, y, depth = points[:, 0], points[:, 1], -points[:, 2]
-    du = np.stack([fx / depth, np.zeros_like(depth), fx * x / depth ** 2], axis=1)   # d(column)/dP'
-    dv = np.stack([np.zeros_like(depth), -fy / depth, -fy * y / depth ** 2], axis=1)  # d(row)/dP'
+    # d(column)/dP' = (ux, 0, uz) and d(row)/dP' = (0, vy, vz)
+    ux, uz = fx / depth, fx * x / depth ** 2
+    vy, vz = -fy / depth, -fy * y / depth ** 2
     # P' = R^T (P - pivot - t) + pivot: dP'/domega = skew(P - pivot), dP'/dt = -I, and
-    # g^T skew(q) = (g x q)^T for any gradient row g
-    q = points - pivot
-    return np.stack([np.concatenate([np.cross(du, q), -du], axis=1),
-                     np.concatenate([np.cross(dv, q), -dv], axis=1)], axis=1)
+    # g^T skew(q) = (g x q)^T for any gradient row g (the cross products written out: the
+    # zero entries of the two rows drop their terms)
+    qx, qy, qz = (points - pivot).T
+    out = np.zeros((len(points), 2, 6))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = -uz * qy, uz * qx - ux * qz, ux * qy
+    out[:, 0, 3], out[:, 0, 5] = -ux, -uz
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = vy * qz - vz * qy, vz * qx, -vy * qx
+    out[:, 1, 4], out[:, 1, 5] = -vy, -vz
+    return out
 
 
 def _sample(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -204,7 +210,7 @@ def _align(observed: np.ndarray, gradients: np.ndarray, factor: int, template: n
         pivot = w2c[:3, :3] @ pivot_world + w2c[:3, 3]
         j_pix = projection_jacobian(p_cam, pivot, cam.fx, cam.fy)                      # (N, 2, 6)
         g = _sample(gradients, xy / factor).reshape(-1, 2, channels)            # (N, 2, C)
-        jac = (g[:, 0, :, None] * j_pix[:, 0, None, :] + g[:, 1, :, None] * j_pix[:, 1, None, :]) / scale
+        jac = np.matmul(g.transpose(0, 2, 1), j_pix) / scale                    # (N, C, 6)
         w = irls_weights(np.linalg.norm(r, axis=1), "cauchy", spread) * inside
         jac = jac.reshape(-1, 6)[:, free]
         w, rr = np.repeat(w, channels), r.reshape(-1)

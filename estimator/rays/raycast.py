@@ -132,14 +132,14 @@ class RayCaster:
         miss; point (H*W, 3) float64, NaN on a miss), from the camera's face-ID buffer (traced
         once and kept, :meth:`face_id_buffers`) and the hit face's plane."""
         face = self.face_id_buffer(camera).ravel().astype(np.int64)
-        origins, dirs = camera.pixel_rays()
         hit = np.nonzero(face >= 0)[0]
+        dirs = camera.subpixel_directions(hit, 1).T   # the hit pixels' centre rays only
         normal = self.mesh.face_normals[face[hit]]
         corner = self.mesh.vertices[self.mesh.faces[face[hit], 0]]
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.sum(normal * (corner - origins[hit]), axis=1) / np.sum(normal * dirs[hit], axis=1)
+            t = np.sum(normal * (corner - camera.center), axis=1) / np.sum(normal * dirs, axis=1)
         points = np.full((len(face), 3), np.nan)
-        points[hit] = origins[hit] + t[:, None] * dirs[hit]
+        points[hit] = camera.center + t[:, None] * dirs
         face[hit[~np.isfinite(t)]] = MISS   # a ray along its face's plane (grazing)
         return face, points
 

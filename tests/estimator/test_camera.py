@@ -48,6 +48,10 @@ def test_pixel_directions_are_the_pixel_rays_per_axis():
     world = cam.c2w[:3, :3] @ local
     np.testing.assert_allclose(d, world / np.linalg.norm(world, axis=0), atol=1e-15)
     np.testing.assert_array_equal(d.T, cam.pixel_rays()[1])
+    # one sub-pixel sample is the pixel centre: the rays of chosen pixels alone (what the pose
+    # refinement and the predicted images take, for the pixels on the mesh)
+    pixels = np.array([0, 5, 64 * 47 + 63, 1000])
+    np.testing.assert_allclose(cam.subpixel_directions(pixels, 1), d[:, pixels], atol=1e-15)
 
 
 def test_bad_cameras_are_refused():
