@@ -26,6 +26,20 @@ def test_mesh_errors():
         TriangleMesh(np.full((3, 3), np.nan), np.array([[0, 1, 2]]))
 
 
+def test_a_mesh_computes_its_normals_and_centroids_once_read_only():
+    """Every view's rows and rays start at the faces' centroids and normals: computed once per
+    mesh and shared, so a caller cannot change them under the others."""
+    mesh = sphere(1)
+    corners = mesh.vertices[mesh.faces]
+    np.testing.assert_allclose(mesh.centroids, corners.mean(axis=1), atol=1e-15)
+    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    np.testing.assert_allclose(mesh.face_normals, n / np.linalg.norm(n, axis=1, keepdims=True), atol=1e-15)
+    assert mesh.centroids is mesh.centroids and mesh.face_normals is mesh.face_normals
+    for array in (mesh.centroids, mesh.face_normals):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0, 0] = 1.0
+
+
 def test_view_errors():
     with pytest.raises(ValueError, match="intrinsics say 16x12"):
         View("a", CAM, np.zeros((10, 16, 3)))

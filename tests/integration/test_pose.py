@@ -90,6 +90,39 @@ def test_a_coarse_level_is_the_full_resolution_blur(sigma):
     assert error[inner].max() <= (1e-6 if factor == 1 else 0.04) * reference.max()
 
 
+@pytest.mark.parametrize("with_alpha", [True, False])
+def test_kept_levels_are_the_blur_of_the_weighted_image_and_its_gradients(with_alpha):
+    """ObservedLevels blurs the colours and the alpha apart and keeps them: a level with the
+    silhouette at weight w equals the blur of [colours x alpha, w x alpha] and its central
+    differences (column then row, per camera pixel), as blurred whole; the silhouette alone is
+    the alpha's level; a second request returns the kept arrays."""
+    from estimator.core.data import View
+    from estimator.pipeline.pose import ObservedLevels, _gradients
+
+    rng = np.random.default_rng(1)
+    alpha = np.zeros((48, 64), np.float32)
+    alpha[10:40, 12:50] = 1.0
+    rgb = rng.random((48, 64, 3)).astype(np.float32)
+    camera = Camera(look_at([0.0, 0.0, 4.0], [0.0, 0.0, 0.0]), 60.0, 60.0, 32.0, 24.0, 64, 48)
+    view = View("v", camera, rgb, alpha if with_alpha else None)
+    levels = ObservedLevels(view)
+    for sigma in (1.0, 4.0, 8.0):
+        seen = rgb * alpha[..., None] if with_alpha else rgb
+        if with_alpha:
+            seen = np.concatenate([seen, 0.37 * alpha[..., None]], axis=2)
+        blurred, factor = _blur(seen, sigma)
+        image, gradients, level_factor = levels.level(sigma, True, 0.37)
+        assert level_factor == factor and image.shape == blurred.shape
+        np.testing.assert_allclose(image, blurred, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(gradients, _gradients(blurred, factor), rtol=1e-5, atol=1e-6)
+    if with_alpha:
+        outline, _, _ = levels.level(8.0, False, 1.0)
+        np.testing.assert_allclose(outline, _blur(alpha[..., None], 8.0)[0], rtol=1e-6, atol=1e-7)
+        assert levels.level(8.0, False, 1.0)[0] is outline
+    else:
+        assert levels.alpha is None and levels.level(4.0, True, 0.37)[0] is levels.level(4.0, True, 2.0)[0]
+
+
 def test_unestimated_pixels_take_their_known_neighbours_mean():
     from estimator.pipeline.pose import _fill_unestimated
 
