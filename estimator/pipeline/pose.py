@@ -55,6 +55,10 @@ POSE_MIN_POINTS = 200    # a view with fewer covered pixels keeps its pose
 # which the pose is wrong: correct poses measured 0.01-0.3 px on every shipped scene (edge pixels
 # split by the 0.5 threshold), a 0.5 deg jitter several px
 POSE_OUTLINE_TOLERANCE = 1.0
+# bytes of observed levels kept across the rounds, all views together (ObservedLevels): every
+# level of 24 views at 256² (7 MiB a view) fits; larger images keep their first levels and blur
+# the others again each round, so the memory does not grow with the images' size
+POSE_KEPT_BYTES = 256 * 2**20
 
 
 @dataclass
@@ -251,7 +255,8 @@ class ObservedLevels:
     gradients, made on first use and kept: the images do not change between the rounds of a
     pose refinement, only the camera, and the blur and the gradients are linear, so the
     silhouette channel's weight (the colours' level, which the prediction sets) scales the
-    kept alpha level instead of being blurred anew.
+    kept alpha level instead of being blurred anew. Levels are kept up to ``max_bytes`` (None:
+    all); those beyond it are made again on each use.
 
     Attributes
     ----------
@@ -259,18 +264,23 @@ class ObservedLevels:
     alpha : (H, W) or None, the view's :func:`silhouette`.
     """
 
-    def __init__(self, view: View):
+    def __init__(self, view: View, max_bytes: int | None = None):
         self.alpha = silhouette(view)
         self.colour = view.rgb if view.alpha is None else view.rgb * view.alpha[..., None]
         self._levels: dict[tuple[str, float], tuple[np.ndarray, np.ndarray, int]] = {}
+        self._left = np.inf if max_bytes is None else max_bytes
 
     def _level(self, part: str, sigma: float) -> tuple[np.ndarray, np.ndarray, int]:
         key = (part, sigma)
-        if key not in self._levels:
-            image = self.colour if part == "colour" else self.alpha[..., None]
-            blurred, factor = _blur(image, sigma)
-            self._levels[key] = blurred, _gradients(blurred, factor), factor
-        return self._levels[key]
+        if key in self._levels:
+            return self._levels[key]
+        image = self.colour if part == "colour" else self.alpha[..., None]
+        blurred, factor = _blur(image, sigma)
+        level = blurred, _gradients(blurred, factor), factor
+        size = blurred.nbytes + level[1].nbytes
+        if size <= self._left:
+            self._levels[key], self._left = level, self._left - size
+        return level
 
     def level(self, sigma: float, colour: bool, silhouette_weight: float) -> tuple[np.ndarray, np.ndarray, int]:
         """(image (H', W', C), gradients (H', W', 2C), factor) at the level ``sigma``: the
@@ -508,7 +518,8 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
                          f"against an estimate from the others); got {folds}")
     caster = caster or RayCaster(data.mesh)
     centre = data.mesh.bounds_centre
-    observed = [ObservedLevels(v) for v in data.views]   # the images' levels, kept across the rounds
+    # the images' levels, kept across the rounds
+    observed = [ObservedLevels(v, POSE_KEPT_BYTES // n) for v in data.views]
     centred = []
     for v, levels in zip(data.views, observed):
         cam = centre_view(v, caster, observed=levels)

@@ -121,6 +121,12 @@ def test_kept_levels_are_the_blur_of_the_weighted_image_and_its_gradients(with_a
         assert levels.level(8.0, False, 1.0)[0] is outline
     else:
         assert levels.alpha is None and levels.level(4.0, True, 0.37)[0] is levels.level(4.0, True, 2.0)[0]
+    # within a byte budget: a level that does not fit is made again, equal, on each use
+    size = sum(a.nbytes for a in levels._level("colour", 1.0)[:2])
+    tight = ObservedLevels(view, max_bytes=size)
+    kept, again = tight._level("colour", 1.0)[0], tight._level("colour", 2.0)[0]
+    assert tight._level("colour", 1.0)[0] is kept and tight._level("colour", 2.0)[0] is not again
+    np.testing.assert_array_equal(tight._level("colour", 2.0)[0], again)
 
 
 def test_unestimated_pixels_take_their_known_neighbours_mean():
