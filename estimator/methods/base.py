@@ -52,9 +52,10 @@ class Method(ABC):
                  known_radiance: np.ndarray | None = None, log=None, prior: Estimate | None = None):
         self.config = config
         # an estimate of the same object and light from other views (the pose refinement's
-        # previous held-out estimate): a method may start its light there. On a well-determined
-        # problem the result is the cold start's within the solver's tolerance; where the data
-        # leave several local optima, the one reached may differ
+        # previous held-out estimate): a method may start its light there, and a robust solve
+        # its weights (_prior_weights). On a well-determined problem the result is the cold
+        # start's within the solver's tolerance; where the data leave several local optima,
+        # the one reached may differ
         self.prior = prior
         self.model = reflection_model(config)
         self.known_sh = known_sh
@@ -88,7 +89,9 @@ class Method(ABC):
         residual. With ``config.robust_loss`` other than 'none', the solve is iteratively
         reweighted (:mod:`estimator.solvers.robust`): glints are clipped at ``glint_ratio`` x the
         face's median colour first, then ``robust_rounds`` rounds reweight every row by the
-        loss of its relative residual. The result's ``weights`` are the final ones."""
+        loss of its relative residual. With a prior estimate of the faces (:meth:`_prior_weights`),
+        a free light and ``robust_rounds`` >= 1, the first weights are the prior's and
+        ``robust_rounds`` - 1 rounds follow. The result's ``weights`` are the final ones."""
         base = np.ones(len(prep.obs.face)) if weights is None else weights
         if self.loss == "none":
             result = self._weighted_solve(prep, face_group, num_groups, fixed_light, weights, self._prior_light())
@@ -124,9 +127,12 @@ class Method(ABC):
         one. A prior from other views of the same object has been through the reweighting
         already, so its weights stand in for the first round's (a warm start of the
         reweighting: one bilinear solve fewer). Rows of faces the prior left unestimated get
-        the glint clipping of :meth:`_initial_weights`."""
+        the glint clipping of :meth:`_initial_weights`. Only a problem on the mesh's own faces
+        qualifies: a face subset or a clustered problem numbers its faces otherwise."""
         light = self._prior_light()
-        if light is None or self.prior.diffuse.shape[0] != prep.obs.num_faces:
+        faces = prep.data.mesh.num_faces
+        if light is None or prep.adjacency is not None or prep.obs.num_faces != faces \
+                or self.prior.diffuse.shape[0] != faces:
             return None
         obs = prep.obs
         known = self.prior.observed[obs.face] & np.all(np.isfinite(self.prior.diffuse[obs.face])

@@ -278,7 +278,9 @@ class ObservedLevels:
         blurred, factor = _blur(image, sigma)
         level = blurred, _gradients(blurred, factor), factor
         size = blurred.nbytes + level[1].nbytes
-        if size <= self._left:
+        if size <= self._left:   # kept, and shared by every later use: read-only
+            for array in level[:2]:
+                array.setflags(write=False)
             self._levels[key], self._left = level, self._left - size
         return level
 

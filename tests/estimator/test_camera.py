@@ -54,6 +54,23 @@ def test_pixel_directions_are_the_pixel_rays_per_axis():
     np.testing.assert_allclose(cam.subpixel_directions(pixels, 1), d[:, pixels], atol=1e-15)
 
 
+def test_a_rigid_transform_is_checked_to_numpy_allclose_tolerances():
+    """The camera's rigid-transform check has np.allclose's tolerances written out: a bottom
+    row within 1e-8 + 1e-5 of (0, 0, 0, 1) and a rotation orthonormal to 1e-3 pass, just
+    beyond them fail, and a reflection fails."""
+    def make(bottom: float, scale: float, flip: float = 1.0):
+        c2w = camera.look_at([0.5, 1.0, 4.0], [0, 0, 0])
+        c2w[:3, :3] *= scale
+        c2w[:3, 0] *= flip
+        c2w[3, 3] = bottom
+        return camera.Camera(c2w, 70.0, 70.0, 32.0, 24.0, 64, 48)
+
+    make(1.0 + 0.99e-5, 1.0 + 4.9e-4)   # R^T R = (1 + 4.9e-4)^2 I: within 1e-3 + 1e-5
+    for bottom, scale, flip in ((1.0 + 1.01e-5, 1.0, 1.0), (1.0, 1.0 + 5.1e-4, 1.0), (1.0, 1.0, -1.0)):
+        with pytest.raises(ValueError, match="rigid"):
+            make(bottom, scale, flip)
+
+
 def test_bad_cameras_are_refused():
     with pytest.raises(ValueError, match="4x4"):
         camera.Camera(np.eye(3), 1, 1, 0, 0, 4, 4)

@@ -392,6 +392,14 @@ def test_a_robust_solve_from_a_prior_starts_from_its_weights(tiny_earth_data, mo
     # a prior that estimated none of the faces gives no weights: the cold start
     blind = dataclasses.replace(prior, observed=np.zeros_like(prior.observed))
     assert method(config, prior=blind)._prior_weights(prep, np.ones(len(prep.obs.face))) is None
+    # nor does a problem that numbers its faces otherwise (a subset of them)
+    subset = prep.face_subset(np.arange(0, data.mesh.num_faces, 2))
+    assert warm_method._prior_weights(subset, np.ones(len(subset.obs.face))) is None
+    # and a given light keeps the cold reweighting: robust_rounds + 1 solves
+    solves[:] = []
+    group, _, groups = base._per_face_groups(prep)
+    warm_method._solve_groups(prep, group, groups, fixed_light=prior.light)
+    assert len(solves) == config.robust_rounds + 1
 
 
 def test_rounds_stop_once_a_round_moves_no_view(tiny_earth_data, monkeypatch):
