@@ -141,9 +141,7 @@ class Method(ABC):
             return None
         diffuse = np.where(known[:, None], self.prior.diffuse[obs.face], 0.0)
         specular = np.where(known[:, None], self.prior.specular[obs.face], 0.0)
-        predicted = self.model.predict(diffuse, specular, prep.c_rows @ light, prep.d_rows @ light)
-        r = robust.relative_residuals(obs.rgb, predicted)
-        weights = robust.irls_weights(r, self.loss, robust.robust_scale(r[known], base[known]))
+        weights = self._weights_under(prep, diffuse, specular, light, base * known)
         return np.where(known, weights, self._initial_weights(prep))
 
     def _initial_weights(self, prep: Prepared) -> np.ndarray:
@@ -157,14 +155,19 @@ class Method(ABC):
                   base: np.ndarray | None = None) -> np.ndarray:
         """(N,) robust weights of every observation under ``result`` (ones without a robust
         loss); the scale is taken over the rows with ``base`` > 0."""
-        obs = prep.obs
         if self.loss == "none":
-            return np.ones(len(obs.face))
-        g = face_group[obs.face]
-        predicted = self.model.predict(result.diffuse[g], result.specular[g], prep.c_rows @ result.light,
-                                       prep.d_rows @ result.light)
-        r = robust.relative_residuals(obs.rgb, predicted)
-        return robust.irls_weights(r, self.loss, robust.robust_scale(r, base))
+            return np.ones(len(prep.obs.face))
+        g = face_group[prep.obs.face]
+        return self._weights_under(prep, result.diffuse[g], result.specular[g], result.light, base)
+
+    def _weights_under(self, prep: Prepared, diffuse: np.ndarray, specular: np.ndarray, light: np.ndarray,
+                       among: np.ndarray | None) -> np.ndarray:
+        """(N,) the robust loss's weights of the rows under the albedos ``diffuse`` and
+        ``specular`` (N, 3), one per row, and the light unknown ``light`` (M, 3); the scale is
+        taken over the rows with ``among`` > 0 (None: every row)."""
+        predicted = self.model.predict(diffuse, specular, prep.c_rows @ light, prep.d_rows @ light)
+        r = robust.relative_residuals(prep.obs.rgb, predicted)
+        return robust.irls_weights(r, self.loss, robust.robust_scale(r, among))
 
     def _weighted_solve(self, prep: Prepared, face_group: np.ndarray, num_groups: int,
                         fixed_light: np.ndarray | None, weights: np.ndarray | None,
