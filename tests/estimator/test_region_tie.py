@@ -1,6 +1,7 @@
 """When ``retinex-segmented`` ties a uniform region's faces to one albedo
 (:func:`estimator.methods.retinex_segmented.edges.tied_regions`): a region of noise holds, with
-the drift noise alone gives, and a texture chained into one region does not."""
+the drift noise alone gives, and a texture chained into one region does not; faces join regions
+under the final light."""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -65,3 +66,35 @@ def test_a_texture_chained_into_one_region_keeps_its_albedos():
     assert out is h and out.source is LightSource.EDGES
     assert out.deviation > ctx.config.region_max_deviation and out.drift > ctx.config.region_max_drift
     np.testing.assert_array_equal(out.albedo, albedo)
+
+
+def test_faces_join_regions_under_the_final_light(monkeypatch):
+    """Faces outside the segmentation's regions join the region nearest in albedo under each
+    fitted light, from the segmentation's regions every time: a face a first, rougher light
+    joined to the wrong region is not kept there. A 20 x 20 grid: columns 0-9 of albedo A,
+    10-19 of albedo B; the segmentation found columns 0-7 (region 0) and 12-19 (region 1). The
+    first tied fit (scripted) darkens columns 8-11 through a second column of the shading, so
+    that A's faces there look like B; the second fit's light is the true one. Every face ends
+    in its true region, with its region's albedo (the rule before kept columns 8-9 in B)."""
+    n = 20
+    col = np.tile(np.arange(n), n)
+    a, b = np.array([0.6, 0.4, 0.3]), np.array([0.3, 0.3, 0.5])
+    albedo = np.where((col < 10)[:, None], a, b)
+    patch = ((col >= 8) & (col < 12)).astype(float)
+    columns = np.column_stack([np.ones(n * n), patch])
+    idx = np.arange(n * n).reshape(n, n)
+    edges = np.concatenate([np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1),
+                            np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)])
+    usable = np.ones(n * n, bool)
+    ctx = FitContext(SimpleNamespace(), EstimatorConfig(), None, "cauchy", None, edges, usable, {})
+    segmented = np.where(col < 8, 0, np.where(col >= 12, 1, -1))
+    truth = np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
+    rough = np.array([[1.0, 1.0, 1.0], a / b - 1.0])   # A's faces in the patch look like B
+    h = Hypothesis(albedo.copy(), truth, Shading(columns), albedo, usable, segmented, 2, 0.8, LightSource.EDGES, None)
+    lights = iter([rough, truth])
+    monkeypatch.setattr("estimator.light.edge_fit.log_shading_fit",
+                        lambda *args, **kwargs: (next(lights), np.stack([a, b])))
+    out = tied_regions(ctx, h)
+    assert out.source is LightSource.EDGES_AND_REGIONS
+    np.testing.assert_array_equal(out.labels, (col >= 10).astype(int))
+    np.testing.assert_allclose(out.albedo, albedo)

@@ -44,8 +44,10 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
 
 
 def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
-    """The light refitted with each uniform region's faces tied to one albedo (twice; faces near
-    a region in albedo join it after the first fit), taken when the regions hold: the regions'
+    """The light refitted with each uniform region's faces tied to one albedo (twice; after each
+    fit, the faces outside the segmentation's regions join the region near their albedo under
+    that light, from the segmentation's regions each time: a face the first, rougher light
+    joined to the wrong region is not kept there), taken when the regions hold: the regions'
     deviation (the median over their faces of the mean over channels of |log(face albedo /
     region albedo)|, each face's own albedo under the tied light) is at most
     ``region_max_deviation``, or its drift (that deviation over the same median between
@@ -55,12 +57,13 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
 
     Returns the tied hypothesis, or ``edges_only`` with the deviation and drift measured."""
     c, h = ctx.config, edges_only
-    labels, light = np.where(h.lit, h.labels, -1), h.light
+    segmented = labels = np.where(h.lit, h.labels, -1)
+    light = h.light
     for _ in range(2):
         light, region_albedo = edge_fit.log_shading_fit(h.radiance, h.shading.columns, ctx.edges, ctx.usable, labels,
                                                         initial=light, **ctx.fit)
         albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
-        joined = assign_to_regions(labels, in_unit_dc(albedo, light), lit, ctx.edges, 2.5 * c.segment_threshold)
+        joined = assign_to_regions(segmented, in_unit_dc(albedo, light), lit, ctx.edges, 2.5 * c.segment_threshold)
         labels = np.where(lit & (joined < h.regions), joined, -1)
     tied = lit & (labels >= 0)
     a, b = ctx.edges[:, 0], ctx.edges[:, 1]
