@@ -1,7 +1,7 @@
 """When ``retinex-segmented`` ties a uniform region's faces to one albedo
 (:func:`estimator.methods.retinex_segmented.edges.tied_regions`): a region of noise holds, with
 the drift noise alone gives, and a texture chained into one region does not; faces join regions
-under the final light."""
+from the segmentation under each light, until the assignment repeats."""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -68,14 +68,16 @@ def test_a_texture_chained_into_one_region_keeps_its_albedos():
     np.testing.assert_array_equal(out.albedo, albedo)
 
 
-def test_faces_join_regions_under_the_final_light(monkeypatch):
-    """Faces outside the segmentation's regions join the region nearest in albedo under each
-    fitted light, from the segmentation's regions every time: a face a first, rougher light
-    joined to the wrong region is not kept there. A 20 x 20 grid: columns 0-9 of albedo A,
-    10-19 of albedo B; the segmentation found columns 0-7 (region 0) and 12-19 (region 1). The
-    first tied fit (scripted) darkens columns 8-11 through a second column of the shading, so
-    that A's faces there look like B; the second fit's light is the true one. Every face ends
-    in its true region, with its region's albedo (the rule before kept columns 8-9 in B)."""
+def test_faces_join_regions_from_the_segmentation_each_fit(monkeypatch):
+    """Faces outside the segmentation's regions join a region under each fitted light, from the
+    segmentation's regions every time, and the light is fitted again until that assignment
+    repeats: a face a first, rougher light joined to the wrong region is neither kept there nor
+    tied in the light returned. A 20 x 20 grid: columns 0-9 of albedo A, 10-19 of albedo B; the
+    segmentation found columns 0-7 (region 0) and 12-19 (region 1). The first tied fit
+    (scripted) changes the shading of columns 8-11 through a second column, so that A's faces
+    there look like B (brighter in red and green, darker in blue); the later fits' light is the
+    true one. Every face ends in its true region with its region's albedo, and the last fit tied
+    exactly those regions (the rule before kept columns 8-9 in B)."""
     n = 20
     col = np.tile(np.arange(n), n)
     a, b = np.array([0.6, 0.4, 0.3]), np.array([0.3, 0.3, 0.5])
@@ -91,10 +93,16 @@ def test_faces_join_regions_under_the_final_light(monkeypatch):
     truth = np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
     rough = np.array([[1.0, 1.0, 1.0], a / b - 1.0])   # A's faces in the patch look like B
     h = Hypothesis(albedo.copy(), truth, Shading(columns), albedo, usable, segmented, 2, 0.8, LightSource.EDGES, None)
-    lights = iter([rough, truth])
-    monkeypatch.setattr("estimator.light.edge_fit.log_shading_fit",
-                        lambda *args, **kwargs: (next(lights), np.stack([a, b])))
+    tied = []
+
+    def scripted(radiance, columns, edges, usable, labels, **kwargs):
+        tied.append(labels.copy())
+        return (rough if len(tied) == 1 else truth), np.stack([a, b])
+
+    monkeypatch.setattr("estimator.light.edge_fit.log_shading_fit", scripted)
     out = tied_regions(ctx, h)
     assert out.source is LightSource.EDGES_AND_REGIONS
     np.testing.assert_array_equal(out.labels, (col >= 10).astype(int))
+    np.testing.assert_array_equal(tied[-1], out.labels)
+    assert len(tied) == 3   # the segmentation's regions, the rough light's joins, the true light's
     np.testing.assert_allclose(out.albedo, albedo)

@@ -9,6 +9,11 @@ from ...solvers.segmentation import assign_to_regions, segment, split_modes, spl
 from .shading import deviation, divide, in_unit_dc
 from .values import FitContext, Hypothesis, LightSource, Shading
 
+# the tied fits of :func:`tied_regions` at most: the first with the segmentation's regions, then
+# with the faces each light's assignment joins, until that assignment repeats (a bound on the
+# cost: each fit is a Gauss-Newton fit of the whole light)
+TIE_FITS = 3
+
 
 def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None) -> Hypothesis:
     """The light fitted to the edges of ``radiance`` (F, 3) (:func:`edge_fit.log_shading_fit`).
@@ -44,10 +49,14 @@ def edge_hypothesis(ctx: FitContext, radiance: np.ndarray, found: sun.Sun | None
 
 
 def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
-    """The light refitted with each uniform region's faces tied to one albedo (twice; after each
-    fit, the faces outside the segmentation's regions join the region near their albedo under
-    that light, from the segmentation's regions each time: a face the first, rougher light
-    joined to the wrong region is not kept there), taken when the regions hold: the regions'
+    """The light refitted with each uniform region's faces tied to one albedo, taken when the
+    regions hold. After each fit the faces outside the segmentation's regions join a region
+    under that light (:func:`assign_to_regions`: near it in albedo, or by their neighbours'
+    vote), from the segmentation's regions each time, and the light is fitted again with them
+    tied until the assignment no longer changes: a face that a first, rougher light joined to
+    the wrong region is neither kept there nor tied in the light returned (past
+    :data:`TIE_FITS` fits the last assignment is kept with the light of the fit before it).
+    The regions hold when their
     deviation (the median over their faces of the mean over channels of |log(face albedo /
     region albedo)|, each face's own albedo under the tied light) is at most
     ``region_max_deviation``, or its drift (that deviation over the same median between
@@ -59,12 +68,14 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
     c, h = ctx.config, edges_only
     segmented = labels = np.where(h.lit, h.labels, -1)
     light = h.light
-    for _ in range(2):
+    for _ in range(TIE_FITS):
         light, region_albedo = edge_fit.log_shading_fit(h.radiance, h.shading.columns, ctx.edges, ctx.usable, labels,
                                                         initial=light, **ctx.fit)
         albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
         joined = assign_to_regions(segmented, in_unit_dc(albedo, light), lit, ctx.edges, 2.5 * c.segment_threshold)
-        labels = np.where(lit & (joined < h.regions), joined, -1)
+        fitted, labels = labels, np.where(lit & (joined < h.regions), joined, -1)
+        if np.array_equal(labels, fitted):   # the light was fitted with the faces its assignment ties
+            break
     tied = lit & (labels >= 0)
     a, b = ctx.edges[:, 0], ctx.edges[:, 1]
     inside = tied[a] & tied[b] & (labels[a] == labels[b])
