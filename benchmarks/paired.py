@@ -26,6 +26,8 @@ import sys
 
 import numpy as np
 
+# random_family.STRATA, restated: importing that module loads Mitsuba and the estimator, which
+# comparing two JSON files does not need
 STRATA = ("light", "material", "albedo", "geometry", "cameras")
 FIELDS = ("seed", "method", "psnr", "within_10", "ari", *STRATA)
 LOW_PSNR = 30.0   # dB: the family's 5th-percentile target
