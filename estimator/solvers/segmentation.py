@@ -276,17 +276,23 @@ def two_modes(features: np.ndarray, min_size: int, iterations: int = 20) -> np.n
 
 def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, edges: np.ndarray,
             reach: float) -> np.ndarray:
-    """Groups: the uniform regions; a face outside them joins the region whose albedo
-    features are within ``reach`` of its own (shading noise in dim faces), or, when its
-    albedo is unknown (no light) or 90 % of the faces are in regions already, the region
-    most of its neighbours joined; any other face is a group of its own (texture)."""
+    """(F,) groups: the uniform regions keep their ids ``0 .. R-1`` (R = ``labels.max() + 1``);
+    a face outside them joins the region whose albedo features are within ``reach`` of its
+    own (shading noise in dim faces), or, when its albedo is unknown (no light) or 90 % of
+    the faces are in regions already, the region most of its neighbours joined; any other
+    seen face is a group of its own (texture), numbered from R on; an unseen face is put in
+    group 0 (it has no rows). A region none of whose faces is seen keeps its id with no
+    seen face, so ``group < R`` is always "in a region". A region's centre is the median
+    of its seen faces with a finite albedo."""
     group = labels.copy()
     regions = int(group.max()) + 1
     if regions:
         finite = np.all(np.isfinite(albedo) & (albedo > 0), axis=1)
         feat = albedo_features(np.where(finite[:, None], albedo, 1.0))
-        centres = group_quantile(group[group >= 0], feat[group >= 0], regions, 0.5, interpolate=True)
-        dist = np.max(np.abs(feat[:, None, :] - centres[None]), axis=2)
+        centred = (group >= 0) & seen & finite
+        centres = group_quantile(group[centred], feat[centred], regions, 0.5, interpolate=True)
+        with np.errstate(invalid="ignore"):   # a region without such a face has NaN centres: never near
+            dist = np.nan_to_num(np.max(np.abs(feat[:, None, :] - centres[None]), axis=2), nan=np.inf)
         near = (group < 0) & seen & finite & (dist.min(axis=1) < reach)
         group[near] = np.argmin(dist[near], axis=1)
         # in a piecewise-uniform object (nearly every face in a region) the rest are faces
@@ -305,5 +311,4 @@ def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, 
     free = np.nonzero((group < 0) & seen)[0]
     group[free] = regions + np.arange(len(free))
     group[~seen] = 0
-    _, compact = np.unique(group, return_inverse=True)
-    return compact.astype(np.int64)
+    return group.astype(np.int64)

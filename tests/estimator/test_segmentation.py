@@ -3,7 +3,15 @@ import numpy as np
 
 from estimator.core.reductions import group_quantile
 from estimator.methods.segmented import BilinearSegmented
-from estimator.solvers.segmentation import albedo_features, bridge_faces, segment, split_modes, split_regions, two_modes
+from estimator.solvers.segmentation import (
+    albedo_features,
+    assign_to_regions,
+    bridge_faces,
+    segment,
+    split_modes,
+    split_regions,
+    two_modes,
+)
 
 from .meshes import sphere
 
@@ -166,6 +174,23 @@ def test_textured_faces_stay_out_of_uniform_regions():
     albedo = rng.uniform(0.05, 0.9, (mesh.num_faces, 3))
     labels, _ = segment(albedo, mesh.face_adjacency, np.ones(mesh.num_faces, bool))
     assert np.mean(labels >= 0) < 0.05
+
+
+def test_assigned_groups_keep_region_ids_and_centre_on_seen_finite_faces():
+    # faces on a path: region 0 (two faces at 0.2, four seen with no usable albedo), a free
+    # face at 0.21, region 1 entirely unseen, region 2 at an orange, three textured faces
+    grey, nan = [0.2, 0.2, 0.2], [np.nan] * 3
+    albedo = np.array([grey, grey, nan, nan, nan, nan, [0.21] * 3, nan, nan, [0.6, 0.3, 0.1], [0.6, 0.3, 0.1],
+                       [0.02, 0.3, 0.9], [0.9, 0.05, 0.4], [0.5, 0.9, 0.05]])
+    labels = np.array([0, 0, 0, 0, 0, 0, -1, 1, 1, 2, 2, -1, -1, -1])
+    seen = np.ones(14, bool)
+    seen[[7, 8]] = False
+    edges = np.column_stack([np.arange(13), np.arange(1, 14)])
+    group = assign_to_regions(labels, albedo, seen, edges, reach=0.2)
+    np.testing.assert_array_equal(group[:7], 0)          # the centre is 0.2, not the stand-in 1 of the NaN faces
+    np.testing.assert_array_equal(group[[9, 10]], 2)     # region 2 keeps its id though region 1 has no seen face
+    assert np.all(group[11:] >= 3) and len(set(group[11:])) == 3   # textured faces: groups of their own, past R
+    np.testing.assert_array_equal(group[[7, 8]], 0)      # unseen: group 0, no rows
 
 
 def test_region_ties_follow_the_boundary_ratio():
