@@ -40,6 +40,9 @@ from ..solvers import robust
 from .coat import CoatConfig
 
 ROWS_PER_VERTEX = 4  # rows beyond the per-face unknowns per map vertex for a determined map
+# the reweighted rounds' conjugate gradients: relative residual and iteration cap
+CG_TOLERANCE = 1e-8
+CG_ITERATIONS = 200
 
 
 @dataclass
@@ -201,33 +204,32 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
     b = sparse.csr_matrix((transmit, (np.arange(rows), face)), shape=(rows, n_faces))
     smooth = map_differences(height, width)
     cells = height * width
-    ridge = smoothness * (smooth.T @ smooth).toarray() + 1e-9 * np.eye(cells)   # (cells, cells), per unit level
-    def solved(values: np.ndarray, weights: np.ndarray):
-        """The map (cells,) or (cells, C) for values (N,) or (N, C) at row weights (N,), the
-        rows' residuals with each face's diffuse refitted under it, and the values with each
-        face's diffuse projected off (the residuals at the map 0)."""
-        system, right, faces_fit = _face_eliminated_system(a, b, values, weights)
-        system += max(np.trace(system) / cells, 1e-300) * ridge
-        # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
-        fitted = linalg.cho_solve(linalg.cho_factor(system, overwrite_a=True, check_finite=False), right,
-                                  check_finite=False)
-        return fitted, faces_fit(fitted), faces_fit(np.zeros_like(fitted))
-
-    # the first round weighs every row alike: one system for the three channels
-    light, residuals, projections = solved(rgb, np.ones(rows))
+    ridge = smoothness * (smooth.T @ smooth) + 1e-9 * sparse.identity(cells)   # (cells, cells), per unit level
+    # the first round weighs every row alike: one dense system for the three channels, factored
+    system, right, faces_fit = _face_eliminated_system(a, b, rgb, np.ones(rows))
+    level = max(np.trace(system) / cells, 1e-300)
+    # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
+    first = linalg.cho_factor(system + level * ridge.toarray(), overwrite_a=True, check_finite=False)
+    light = linalg.cho_solve(first, right, check_finite=False)
+    residuals, projections = faces_fit(light), faces_fit(np.zeros_like(light))
     diffuse = np.full((n_faces, 3), np.nan)
     explained = np.zeros(3)
+
+    def reweighted(residuals):
+        return np.stack([robust.irls_weights(np.abs(r), loss, robust.robust_scale(np.abs(r), floor=1e-12))
+                         for r in residuals.T], axis=1)
+
+    weights = reweighted(residuals)
+    for _ in range(max(rounds, 1) - 1):
+        light, residuals, projections = _reweighted_solve(a, b, rgb, weights, ridge, first, light)
+        weights = reweighted(residuals)
     for c in range(3):
-        residual, projected = residuals[:, c], projections[:, c]
-        weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual), floor=1e-12))
-        for _ in range(max(rounds, 1) - 1):
-            light[:, c], residual, projected = solved(rgb[:, c], weights)
-            weights = robust.irls_weights(np.abs(residual), loss, robust.robust_scale(np.abs(residual), floor=1e-12))
-        total = np.sum(weights * projected ** 2)
-        explained[c] = 1.0 - np.sum(weights * residual ** 2) / total if total > 0 else 0.0
-        denominator = np.bincount(face, weights * transmit ** 2, minlength=n_faces)
+        residual, projected, weight = residuals[:, c], projections[:, c], weights[:, c]
+        total = np.sum(weight * projected ** 2)
+        explained[c] = 1.0 - np.sum(weight * residual ** 2) / total if total > 0 else 0.0
+        denominator = np.bincount(face, weight * transmit ** 2, minlength=n_faces)
         seen = denominator > 0
-        diffuse[seen, c] = (b.T @ (weights * (rgb[:, c] - a @ light[:, c])))[seen] / denominator[seen]
+        diffuse[seen, c] = (b.T @ (weight * (rgb[:, c] - a @ light[:, c])))[seen] / denominator[seen]
     spare = rows - len(np.unique(face))
     return ReflectedLight(light.reshape(height, width, 3), diffuse, explained, rows,
                           spare >= ROWS_PER_VERTEX * cells)
@@ -273,6 +275,79 @@ def _reflecting_rows(face, view_dir, normals, sampling, visibility, ior):
     mirror = mirror_directions(n, view_dir)
     keep = (cos > 0) & mirror_shadow(face, mirror, sampling, visibility)
     return keep, mirror[keep], fresnel_dielectric(cos[keep], ior)
+
+
+def _reweighted_solve(a, b, values, weights, ridge, first, start):
+    """A reweighted round of the map's fit, each channel under its own row weights: the maps
+    (K, C) for ``values`` (N, C) at row ``weights`` (N, C), the rows' residuals (N, C) with each
+    face's diffuse refitted under them and the values with each face's diffuse projected off.
+
+    Each channel's system is that of :func:`_face_eliminated_system` plus its mean diagonal
+    times ``ridge`` (K, K) sparse, never formed: conjugate gradients multiply by its sparse
+    factors, preconditioned by ``first``, the Cholesky factor of the first round's system (every
+    row weighed alike), and started from ``start`` (K, C), the previous round's maps. Robust
+    weights lie in (0, 1] and change few rows much, so the first system is close to each
+    reweighted one and a few iterations replace a dense factorisation per channel (K = 2048:
+    75 ms each); the channels' iterations run side by side, so that each pass over the factor
+    serves all of them."""
+    channels = values.shape[1]
+    k = a.shape[1]
+    times, right, fits = [], np.zeros((k, channels)), []
+    for c in range(channels):
+        weighted_a = sparse.diags(weights[:, c]) @ a
+        denominator = np.asarray((b.multiply(b).T @ weights[:, c])).ravel()                 # (F,) D
+        inverse = np.where(denominator > 0, 1.0 / np.maximum(denominator, 1e-300), 0.0)
+        p = (b.T @ weighted_a).tocsr()                                                      # (F, K) P
+        p_t, a_t = p.T.tocsr(), weighted_a.T.tocsr()
+        # the trace of a^T W a - P^T D^-1 P, as the dense system's mean diagonal sets the ridge
+        trace = float(np.sum(weights[:, c] * np.asarray(a.multiply(a).sum(axis=1)).ravel())
+                      - np.sum(inverse * np.asarray(p.multiply(p).sum(axis=1)).ravel()))
+        scaled = max(trace / k, 1e-300) * ridge
+        times.append(lambda x, a_t=a_t, p=p, p_t=p_t, inverse=inverse, scaled=scaled:
+                     a_t @ (a @ x) - p_t @ (inverse * (p @ x)) + scaled @ x)
+        right[:, c] = a_t @ values[:, c] - p_t @ (inverse * (b.T @ (weights[:, c] * values[:, c])))
+        fits.append(lambda light, c=c, inverse=inverse: _faces_refitted(a, b, values[:, c], weights[:, c], inverse,
+                                                                          light))
+    fitted = _conjugate_gradients(times, lambda r: linalg.cho_solve(first, r, check_finite=False), right, start)
+    residuals = np.stack([fit(fitted[:, c]) for c, fit in enumerate(fits)], axis=1)
+    projections = np.stack([fit(np.zeros(k)) for fit in fits], axis=1)
+    return fitted, residuals, projections
+
+
+def _faces_refitted(a, b, values, weights, inverse, light):
+    """(N,) the residuals of ``values`` (N,) under the map ``light`` (K,) with each face's
+    diffuse refitted at row ``weights`` (N,) (``inverse`` (F,): 1 / its weighted transmission)."""
+    rest = values - a @ light
+    return rest - b @ (inverse * (b.T @ (weights * rest)))
+
+
+def _conjugate_gradients(times, precondition, right, start):
+    """(K, C) solutions of C symmetric positive definite systems side by side: column c of
+    ``right`` (K, C) by ``times[c]`` (a function of (K,)), each started at column c of ``start``,
+    with one ``precondition`` (a function of (K, C)) applied to all columns at once, until each
+    residual is :data:`CG_TOLERANCE` of its right side (at most :data:`CG_ITERATIONS`). Written
+    here because scipy's ``cg`` takes one system and one right side."""
+    x = start.copy()
+    columns = range(right.shape[1])
+    residual = right - np.stack([times[c](x[:, c]) for c in columns], axis=1)
+    goal = CG_TOLERANCE * np.linalg.norm(right, axis=0)
+    z = precondition(residual)
+    direction = z.copy()
+    rz = np.sum(residual * z, axis=0)
+    for _ in range(CG_ITERATIONS):
+        active = np.linalg.norm(residual, axis=0) > goal
+        if not active.any():
+            break
+        product = np.stack([times[c](direction[:, c]) if active[c] else np.zeros(len(x)) for c in columns], axis=1)
+        curvature = np.sum(direction * product, axis=0)
+        step = np.where(active, rz / np.where(active, curvature, 1.0), 0.0)
+        x += step * direction
+        residual -= step * product
+        z = precondition(residual)
+        rz_next = np.sum(residual * z, axis=0)
+        direction = z + np.where(active, rz_next / np.where(rz > 0, rz, 1.0), 0.0) * direction
+        rz = rz_next
+    return x
 
 
 def _face_eliminated_system(a, b, y, weights):
