@@ -286,10 +286,11 @@ def _reweighted_solve(a, b, values, weights, ridge, first, start):
     times ``ridge`` (K, K) sparse, never formed: conjugate gradients multiply by its sparse
     factors, preconditioned by ``first``, the Cholesky factor of the first round's system (every
     row weighed alike), and started from ``start`` (K, C), the previous round's maps. Robust
-    weights lie in (0, 1] and change few rows much, so the first system is close to each
+    weights lie in [0, 1] and change few rows much, so the first system is close to each
     reweighted one and a few iterations replace a dense factorisation per channel (K = 2048:
     75 ms each); the channels' iterations run side by side, so that each pass over the factor
-    serves all of them."""
+    serves all of them. A channel the iterations leave short of :data:`CG_TOLERANCE` is solved
+    by its dense system, formed and factored."""
     channels = values.shape[1]
     k = a.shape[1]
     times, right, fits = [], np.zeros((k, channels)), []
@@ -308,7 +309,13 @@ def _reweighted_solve(a, b, values, weights, ridge, first, start):
         right[:, c] = a_t @ values[:, c] - p_t @ (inverse * (b.T @ (weights[:, c] * values[:, c])))
         fits.append(lambda light, c=c, inverse=inverse: _faces_refitted(a, b, values[:, c], weights[:, c], inverse,
                                                                           light))
-    fitted = _conjugate_gradients(times, lambda r: linalg.cho_solve(first, r, check_finite=False), right, start)
+    fitted, converged = _conjugate_gradients(times, lambda r: linalg.cho_solve(first, r, check_finite=False),
+                                             right, start)
+    for c in np.nonzero(~converged)[0]:
+        system, right_c, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])
+        trace = max(np.trace(system) / k, 1e-300)
+        fitted[:, c] = linalg.cho_solve(linalg.cho_factor(system + trace * ridge.toarray(), overwrite_a=True,
+                                                          check_finite=False), right_c, check_finite=False)
     residuals = np.stack([fit(fitted[:, c]) for c, fit in enumerate(fits)], axis=1)
     projections = np.stack([fit(np.zeros(k)) for fit in fits], axis=1)
     return fitted, residuals, projections
@@ -321,16 +328,17 @@ def _faces_refitted(a, b, values, weights, inverse, light):
     return rest - b @ (inverse * (b.T @ (weights * rest)))
 
 
-def _conjugate_gradients(times, precondition, right, start):
+def _conjugate_gradients(times, precondition, right, start) -> tuple[np.ndarray, np.ndarray]:
     """(K, C) solutions of C symmetric positive definite systems side by side: column c of
     ``right`` (K, C) by ``times[c]`` (a function of (K,)), each started at column c of ``start``,
     with one ``precondition`` (a function of (K, C)) applied to all columns at once, until each
-    residual is :data:`CG_TOLERANCE` of its right side (at most :data:`CG_ITERATIONS`). Written
-    here because scipy's ``cg`` takes one system and one right side."""
+    residual is :data:`CG_TOLERANCE` of the larger of its right side and its first residual
+    (at most :data:`CG_ITERATIONS`); and (C,) bool, which columns got there. Written here
+    because scipy's ``cg`` takes one system and one right side."""
     x = start.copy()
     columns = range(right.shape[1])
     residual = right - np.stack([times[c](x[:, c]) for c in columns], axis=1)
-    goal = CG_TOLERANCE * np.linalg.norm(right, axis=0)
+    goal = CG_TOLERANCE * np.maximum(np.linalg.norm(right, axis=0), np.linalg.norm(residual, axis=0))
     z = precondition(residual)
     direction = z.copy()
     rz = np.sum(residual * z, axis=0)
@@ -347,7 +355,7 @@ def _conjugate_gradients(times, precondition, right, start):
         rz_next = np.sum(residual * z, axis=0)
         direction = z + np.where(active, rz_next / np.where(rz > 0, rz, 1.0), 0.0) * direction
         rz = rz_next
-    return x
+    return x, np.linalg.norm(residual, axis=0) <= goal
 
 
 def _face_eliminated_system(a, b, y, weights):

@@ -252,7 +252,30 @@ def test_conjugate_gradients_solve_several_systems_side_by_side():
         matrices.append(m @ m.T + k * np.eye(k))
     right = rng.normal(size=(k, 3))
     inverse = np.linalg.inv(matrices[0])
-    x = _conjugate_gradients([lambda v, m=m: m @ v for m in matrices], lambda r: inverse @ r, right,
-                             np.zeros((k, 3)))
+    x, converged = _conjugate_gradients([lambda v, m=m: m @ v for m in matrices], lambda r: inverse @ r, right,
+                                        np.zeros((k, 3)))
+    assert converged.all()
     for c, m in enumerate(matrices):
         np.testing.assert_allclose(x[:, c], np.linalg.solve(m, right[:, c]), rtol=1e-6)
+
+def test_a_channel_the_iterations_leave_short_is_solved_densely(monkeypatch):
+    """With one iteration allowed, the conjugate gradients say no column converged, and the
+    reweighted round solves those channels by their dense systems: the maps still equal the
+    dense solve's."""
+    rng = np.random.default_rng(9)
+    rows, faces, cells = 300, 30, 20
+    face = rng.integers(0, faces, rows)
+    a = sparse.csr_matrix(rng.random((rows, cells)) * (rng.random((rows, cells)) < 0.3))
+    b = sparse.csr_matrix((0.5 + rng.random(rows), (np.arange(rows), face)), shape=(rows, faces))
+    ridge = 1e-2 * sparse.identity(cells)
+    values, weights = rng.normal(size=(rows, 3)), rng.uniform(0.05, 1.0, size=(rows, 3))
+    system, _, _ = _face_eliminated_system(a, b, values, np.ones(rows))
+    first = linalg.cho_factor(system + np.trace(system) / cells * ridge.toarray())
+    monkeypatch.setattr("estimator.light.coat_map.CG_ITERATIONS", 1)
+    _, converged = _conjugate_gradients([lambda v: system @ v] * 3, lambda r: r, values[:cells], np.zeros((cells, 3)))
+    assert not converged.any()
+    light, _, _ = _reweighted_solve(a, b, values, weights, ridge, first, np.zeros((cells, 3)))
+    for c in range(3):
+        dense, right, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])
+        expected = np.linalg.solve(dense + np.trace(dense) / cells * ridge.toarray(), right)
+        np.testing.assert_allclose(light[:, c], expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
