@@ -274,6 +274,16 @@ def two_modes(features: np.ndarray, min_size: int, iterations: int = 20) -> np.n
     return side if length > MODE_QUANTILE * sum(spread) else None
 
 
+def compact_regions(labels: np.ndarray) -> tuple[np.ndarray, int]:
+    """(F,) ``labels`` with the regions that hold a face numbered 0..R-1 in their order (-1,
+    outside every region, kept), and R: a region left without a face drops out."""
+    inside = labels >= 0
+    ids, compact = np.unique(labels[inside], return_inverse=True)
+    out = np.full(len(labels), -1, dtype=np.int64)
+    out[inside] = compact
+    return out, len(ids)
+
+
 def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, edges: np.ndarray,
             reach: float) -> np.ndarray:
     """(F,) groups: the uniform regions keep their ids ``0 .. R-1`` (R = ``labels.max() + 1``);

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from estimator import EstimatorConfig
-from estimator.methods.retinex_segmented.edges import tied_regions
+from estimator.methods.retinex_segmented.edges import TIE_FITS, tied_regions
 from estimator.methods.retinex_segmented.values import FitContext, Hypothesis, LightSource, Shading
 
 
@@ -105,4 +105,42 @@ def test_faces_join_regions_from_the_segmentation_each_fit(monkeypatch):
     np.testing.assert_array_equal(out.labels, (col >= 10).astype(int))
     np.testing.assert_array_equal(tied[-1], out.labels)
     assert len(tied) == 3   # the segmentation's regions, the rough light's joins, the true light's
+    np.testing.assert_allclose(out.albedo, albedo)
+
+
+def test_a_tie_that_does_not_settle_keeps_the_regions_its_last_light_was_fitted_with(monkeypatch):
+    """The assignment never repeats within TIE_FITS fits: a 12 x 12 grid of three regions by
+    columns (A: 0-3, B: 4-7, C: 8-11), the segmentation leaving column 3 out. The first light is
+    true (column 3 joins A), the second leaves C's faces unlit (C drops out of the assignment),
+    the third is true again (C comes back). The tie returns the labels the third fit tied (A and
+    B, C's faces on their own), their albedos from that fit's regions, and counts two regions;
+    taking the last assignment, which the third light was not fitted with, would index a third
+    region that fit never had."""
+    n = 12
+    col = np.tile(np.arange(n), n)
+    palette = np.array([[0.6, 0.4, 0.3], [0.3, 0.3, 0.5], [0.2, 0.5, 0.2]])
+    region = col // 4
+    albedo = palette[region]
+    columns = np.column_stack([np.ones(n * n), (region == 2).astype(float)])
+    idx = np.arange(n * n).reshape(n, n)
+    edges = np.concatenate([np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1),
+                            np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)])
+    usable = np.ones(n * n, bool)
+    ctx = FitContext(SimpleNamespace(), EstimatorConfig(), None, "cauchy", None, edges, usable, {})
+    segmented = np.where(col == 3, -1, region)
+    true = np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
+    dark = np.array([[1.0, 1.0, 1.0], [-0.999, -0.999, -0.999]])   # C's shading at 0.1 %: unlit
+    h = Hypothesis(albedo.copy(), true, Shading(columns), albedo, usable, segmented, 3, 0.9, LightSource.EDGES, None)
+    tied = []
+
+    def scripted(radiance, columns, edges, usable, labels, **kwargs):
+        tied.append(labels.copy())
+        return (dark if len(tied) == 2 else true), palette[:int(labels.max()) + 1]
+
+    monkeypatch.setattr("estimator.light.edge_fit.log_shading_fit", scripted)
+    out = tied_regions(ctx, h)
+    assert len(tied) == TIE_FITS == 3
+    assert out.source is LightSource.EDGES_AND_REGIONS and out.regions == 2
+    np.testing.assert_array_equal(out.labels, np.where(region == 2, -1, region))
+    np.testing.assert_array_equal(tied[-1], out.labels)
     np.testing.assert_allclose(out.albedo, albedo)

@@ -24,7 +24,7 @@ from ...core.reductions import group_quantile
 from ...light import coat, coat_map, indirect, sun
 from ...model.estimate import Estimate
 from ...pipeline.prepared import Prepared
-from ...solvers.segmentation import assign_to_regions, segment, split_modes, split_regions
+from ...solvers.segmentation import assign_to_regions, compact_regions, segment, split_modes, split_regions
 from .result import to_estimate
 from .shading import divide_shade, in_unit_dc
 from .values import FitContext, LightSource, ReflectionFits, Solution
@@ -141,9 +141,8 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
             labels = split_regions(labels, features, lit, edges, c.segment_threshold, c.uniform_spread, bridges)
             if part.coat is None and not part.level.any():   # on the colours as recorded, as the parts were found
                 labels = split_modes(labels, features, lit, edges)
-        regions = int(labels.max()) + 1
         joined = assign_to_regions(labels, features, lit, edges, 2.5 * c.segment_threshold)
-        labels = np.where(lit & (joined < regions), joined, -1)
+        labels, regions = compact_regions(np.where(lit & (joined < int(labels.max()) + 1), joined, -1))
         tied = labels >= 0
         albedo[tied] = group_quantile(labels[tied], albedo[tied], regions, 0.5)[labels[tied]]
     whole = replace(h, radiance=radiance, albedo=albedo, lit=lit, labels=labels, regions=regions)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...light import edge_fit, sun
-from ...solvers.segmentation import assign_to_regions, segment, split_modes, split_regions
+from ...solvers.segmentation import assign_to_regions, compact_regions, segment, split_modes, split_regions
 from .shading import deviation, divide, in_unit_dc
 from .values import FitContext, Hypothesis, LightSource, Shading
 
@@ -55,7 +55,8 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
     vote), from the segmentation's regions each time, and the light is fitted again with them
     tied until the assignment no longer changes: a face that a first, rougher light joined to
     the wrong region is neither kept there nor tied in the light returned (past
-    :data:`TIE_FITS` fits the last assignment is kept with the light of the fit before it).
+    :data:`TIE_FITS` fits, the assignment the last fit tied is kept with its light). A region
+    with no lit face under that light drops out and the rest are numbered anew.
     The regions hold when their
     deviation (the median over their faces of the mean over channels of |log(face albedo /
     region albedo)|, each face's own albedo under the tied light) is at most
@@ -73,10 +74,14 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
                                                         initial=light, **ctx.fit)
         albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
         joined = assign_to_regions(segmented, in_unit_dc(albedo, light), lit, ctx.edges, 2.5 * c.segment_threshold)
-        fitted, labels = labels, np.where(lit & (joined < h.regions), joined, -1)
+        fitted, labels = labels, compact_regions(np.where(lit & (joined < h.regions), joined, -1))[0]
         if np.array_equal(labels, fitted):   # the light was fitted with the faces its assignment ties
             break
-    tied = lit & (labels >= 0)
+    # the faces the light and the regions' albedos were fitted with (the last assignment, where it
+    # repeats), those now unlit left out and the regions without a lit face dropped
+    ids = np.unique(fitted[lit & (fitted >= 0)])
+    labels, region_albedo = compact_regions(np.where(lit, fitted, -1))[0], region_albedo[ids]
+    tied = labels >= 0
     a, b = ctx.edges[:, 0], ctx.edges[:, 1]
     inside = tied[a] & tied[b] & (labels[a] == labels[b])
     spread = deviation(albedo[tied], region_albedo[labels[tied]]) if tied.any() else np.inf
@@ -86,7 +91,7 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
     if not (spread <= c.region_max_deviation or drift <= c.region_max_drift):
         return h
     albedo[tied] = region_albedo[labels[tied]]
-    return Hypothesis(h.radiance, light, h.shading, albedo, lit, labels, h.regions, h.share,
+    return Hypothesis(h.radiance, light, h.shading, albedo, lit, labels, len(ids), h.share,
                       LightSource.EDGES_AND_REGIONS, h.found, spread, drift)
 
 
@@ -109,10 +114,9 @@ def parted_regions(ctx: FitContext, tied: Hypothesis) -> Hypothesis | None:
                            bridges=ctx.prep.blends_albedos)
     if ctx.recorded:
         labels = split_modes(labels, features, lit, ctx.edges)
-    regions = int(labels.max()) + 1
-    if regions <= tied.regions:
+    if int(labels.max()) + 1 <= tied.regions:
         return None
-    light, albedo, lit, labels = _tied_fit(ctx, tied, labels)
+    light, albedo, lit, labels, regions = _tied_fit(ctx, tied, labels)
     return Hypothesis(tied.radiance, light, tied.shading, albedo, lit, labels, regions, tied.share,
                       LightSource.EDGES_AND_PARTED_REGIONS, tied.found, tied.deviation, tied.drift)
 
@@ -128,26 +132,24 @@ def kept_regions(ctx: FitContext, edges: Hypothesis, labels: np.ndarray) -> Hypo
     the faces of a region too noisy for the segmentation or the region gates to find it again
     (a rough coat: development seed 1000 lost its five regions to a texture). The prediction
     cost decides among it and the corrected colours' own hypotheses."""
-    tied = edges.lit & (labels >= 0)
-    if not tied.any():
+    labels, regions = compact_regions(np.where(edges.lit, labels, -1))   # regions without a lit face dropped
+    if not regions:
         return None
-    ids, compact = np.unique(labels[tied], return_inverse=True)   # regions without a lit face dropped
-    labels = np.full(len(labels), -1, dtype=np.int64)
-    labels[tied] = compact
-    light, albedo, lit, labels = _tied_fit(ctx, edges, labels)
-    return Hypothesis(edges.radiance, light, edges.shading, albedo, lit, labels, len(ids),
+    light, albedo, lit, labels, regions = _tied_fit(ctx, edges, labels)
+    return Hypothesis(edges.radiance, light, edges.shading, albedo, lit, labels, regions,
                       float(np.mean(labels[lit] >= 0)), LightSource.EDGES_AND_KEPT_REGIONS, edges.found)
 
 
 def _tied_fit(ctx: FitContext, h: Hypothesis, labels: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """The light fitted from ``h``'s with the regions ``labels`` (F,) tied, and under it each
-    face's albedo (a region's faces its region's), the lit faces and the labels of the lit
-    ones (-1 elsewhere)."""
+    face's albedo (a region's faces its region's), the lit faces, the labels of the lit ones
+    (-1 elsewhere; a region without a lit face dropped, the rest numbered anew) and their count."""
     light, region_albedo = edge_fit.log_shading_fit(h.radiance, h.shading.columns, ctx.edges, ctx.usable, labels,
                                                     initial=h.light, **ctx.fit)
     albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
-    labels = np.where(lit, labels, -1)
+    ids = np.unique(labels[lit & (labels >= 0)])
+    labels, regions = compact_regions(np.where(lit, labels, -1))
     inside = labels >= 0
-    albedo[inside] = region_albedo[labels[inside]]
-    return light, albedo, lit, labels
+    albedo[inside] = region_albedo[ids][labels[inside]]
+    return light, albedo, lit, labels, regions
