@@ -301,8 +301,8 @@ def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, 
         feat = albedo_features(np.where(finite[:, None], albedo, 1.0))
         centred = (group >= 0) & seen & finite
         centres = group_quantile(group[centred], feat[centred], regions, 0.5, interpolate=True)
-        with np.errstate(invalid="ignore"):   # a region without such a face has NaN centres: never near
-            dist = np.nan_to_num(np.max(np.abs(feat[:, None, :] - centres[None]), axis=2), nan=np.inf)
+        # a region without such a face has NaN centres: no face is near it
+        dist = np.nan_to_num(np.max(np.abs(feat[:, None, :] - centres[None]), axis=2), nan=np.inf)
         near = (group < 0) & seen & finite & (dist.min(axis=1) < reach)
         group[near] = np.argmin(dist[near], axis=1)
         # in a piecewise-uniform object (nearly every face in a region) the rest are faces
