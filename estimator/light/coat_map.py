@@ -207,9 +207,7 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
     ridge = smoothness * (smooth.T @ smooth) + 1e-9 * sparse.identity(cells)   # (cells, cells), per unit level
     # the first round weighs every row alike: one dense system for the three channels, factored
     system, right, faces_fit = _face_eliminated_system(a, b, rgb, np.ones(rows))
-    level = max(np.trace(system) / cells, 1e-300)
-    # symmetric positive definite (the ridge keeps it so): Cholesky, two thirds of LU's time
-    first = linalg.cho_factor(system + level * ridge.toarray(), overwrite_a=True, check_finite=False)
+    first = _factored(system, ridge)
     light = linalg.cho_solve(first, right, check_finite=False)
     residuals, projections = faces_fit(light), faces_fit(np.zeros_like(light))
     diffuse = np.full((n_faces, 3), np.nan)
@@ -294,15 +292,16 @@ def _reweighted_solve(a, b, values, weights, ridge, first, start):
     channels = values.shape[1]
     k = a.shape[1]
     times, right, fits = [], np.zeros((k, channels)), []
+    b_squared_t = b.multiply(b).T.tocsr()                                                   # (F, N)
+    a_norms = np.asarray(a.multiply(a).sum(axis=1)).ravel()                                 # (N,) |a_n|^2
     for c in range(channels):
         weighted_a = sparse.diags(weights[:, c]) @ a
-        denominator = np.asarray((b.multiply(b).T @ weights[:, c])).ravel()                 # (F,) D
+        denominator = b_squared_t @ weights[:, c]                                           # (F,) D
         inverse = np.where(denominator > 0, 1.0 / np.maximum(denominator, 1e-300), 0.0)
         p = (b.T @ weighted_a).tocsr()                                                      # (F, K) P
         p_t, a_t = p.T.tocsr(), weighted_a.T.tocsr()
         # the trace of a^T W a - P^T D^-1 P, as the dense system's mean diagonal sets the ridge
-        trace = float(np.sum(weights[:, c] * np.asarray(a.multiply(a).sum(axis=1)).ravel())
-                      - np.sum(inverse * np.asarray(p.multiply(p).sum(axis=1)).ravel()))
+        trace = float(np.sum(weights[:, c] * a_norms) - np.sum(inverse * np.asarray(p.multiply(p).sum(axis=1)).ravel()))
         scaled = max(trace / k, 1e-300) * ridge
         times.append(lambda x, a_t=a_t, p=p, p_t=p_t, inverse=inverse, scaled=scaled:
                      a_t @ (a @ x) - p_t @ (inverse * (p @ x)) + scaled @ x)
@@ -313,12 +312,18 @@ def _reweighted_solve(a, b, values, weights, ridge, first, start):
                                              right, start)
     for c in np.nonzero(~converged)[0]:
         system, right_c, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])
-        trace = max(np.trace(system) / k, 1e-300)
-        fitted[:, c] = linalg.cho_solve(linalg.cho_factor(system + trace * ridge.toarray(), overwrite_a=True,
-                                                          check_finite=False), right_c, check_finite=False)
+        fitted[:, c] = linalg.cho_solve(_factored(system, ridge), right_c, check_finite=False)
     residuals = np.stack([fit(fitted[:, c]) for c, fit in enumerate(fits)], axis=1)
     projections = np.stack([fit(np.zeros(k)) for fit in fits], axis=1)
     return fitted, residuals, projections
+
+
+def _factored(system: np.ndarray, ridge: sparse.spmatrix):
+    """The Cholesky factor of the dense map system (K, K) plus its mean diagonal times ``ridge``
+    (K, K) sparse (overwrites ``system``): symmetric positive definite, the ridge keeps it so
+    (Cholesky takes two thirds of LU's time)."""
+    system += max(np.trace(system) / system.shape[0], 1e-300) * ridge.toarray()
+    return linalg.cho_factor(system, overwrite_a=True, check_finite=False)
 
 
 def _faces_refitted(a, b, values, weights, inverse, light):

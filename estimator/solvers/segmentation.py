@@ -105,8 +105,7 @@ def segment(albedo: np.ndarray, edges: np.ndarray, valid: np.ndarray,
     region_of_component = np.full(len(uniform), -1)
     region_of_component[np.nonzero(uniform)[0]] = merged
     labels[valid] = region_of_component[inverse]
-    present, compact = np.unique(labels[labels >= 0], return_inverse=True)
-    labels[labels >= 0] = compact
+    labels, present = compact_regions(labels)
     inside = labels >= 0
     return labels, group_quantile(labels[inside], albedo[inside], len(present), 0.5, interpolate=True)
 
@@ -274,14 +273,15 @@ def two_modes(features: np.ndarray, min_size: int, iterations: int = 20) -> np.n
     return side if length > MODE_QUANTILE * sum(spread) else None
 
 
-def compact_regions(labels: np.ndarray) -> tuple[np.ndarray, int]:
+def compact_regions(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(F,) ``labels`` with the regions that hold a face numbered 0..R-1 in their order (-1,
-    outside every region, kept), and R: a region left without a face drops out."""
+    outside every region, kept), and (R,) the id each had in ``labels``: a region left without
+    a face drops out (index per-region values by these ids to keep them with their regions)."""
     inside = labels >= 0
     ids, compact = np.unique(labels[inside], return_inverse=True)
     out = np.full(len(labels), -1, dtype=np.int64)
     out[inside] = compact
-    return out, len(ids)
+    return out, ids
 
 
 def assign_to_regions(labels: np.ndarray, albedo: np.ndarray, seen: np.ndarray, edges: np.ndarray,

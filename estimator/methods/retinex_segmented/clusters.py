@@ -142,7 +142,8 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
             if part.coat is None and not part.level.any():   # on the colours as recorded, as the parts were found
                 labels = split_modes(labels, features, lit, edges)
         joined = assign_to_regions(labels, features, lit, edges, 2.5 * c.segment_threshold)
-        labels, regions = compact_regions(np.where(lit & (joined < int(labels.max()) + 1), joined, -1))
+        labels, ids = compact_regions(np.where(lit & (joined < int(labels.max()) + 1), joined, -1))
+        regions = len(ids)
         tied = labels >= 0
         albedo[tied] = group_quantile(labels[tied], albedo[tied], regions, 0.5)[labels[tied]]
     whole = replace(h, radiance=radiance, albedo=albedo, lit=lit, labels=labels, regions=regions)

@@ -79,8 +79,8 @@ def tied_regions(ctx: FitContext, edges_only: Hypothesis) -> Hypothesis:
             break
     # the faces the light and the regions' albedos were fitted with (the last assignment, where it
     # repeats), those now unlit left out and the regions without a lit face dropped
-    ids = np.unique(fitted[lit & (fitted >= 0)])
-    labels, region_albedo = compact_regions(np.where(lit, fitted, -1))[0], region_albedo[ids]
+    labels, ids = compact_regions(np.where(lit, fitted, -1))
+    region_albedo = region_albedo[ids]
     tied = labels >= 0
     a, b = ctx.edges[:, 0], ctx.edges[:, 1]
     inside = tied[a] & tied[b] & (labels[a] == labels[b])
@@ -132,8 +132,8 @@ def kept_regions(ctx: FitContext, edges: Hypothesis, labels: np.ndarray) -> Hypo
     the faces of a region too noisy for the segmentation or the region gates to find it again
     (a rough coat: development seed 1000 lost its five regions to a texture). The prediction
     cost decides among it and the corrected colours' own hypotheses."""
-    labels, regions = compact_regions(np.where(edges.lit, labels, -1))   # regions without a lit face dropped
-    if not regions:
+    labels, ids = compact_regions(np.where(edges.lit, labels, -1))   # regions without a lit face dropped
+    if not len(ids):
         return None
     light, albedo, lit, labels, regions = _tied_fit(ctx, edges, labels)
     return Hypothesis(edges.radiance, light, edges.shading, albedo, lit, labels, regions,
@@ -148,8 +148,7 @@ def _tied_fit(ctx: FitContext, h: Hypothesis, labels: np.ndarray
     light, region_albedo = edge_fit.log_shading_fit(h.radiance, h.shading.columns, ctx.edges, ctx.usable, labels,
                                                     initial=h.light, **ctx.fit)
     albedo, lit = divide(h.shading, h.radiance, light, ctx.usable, ctx.extra)
-    ids = np.unique(labels[lit & (labels >= 0)])
-    labels, regions = compact_regions(np.where(lit, labels, -1))
+    labels, ids = compact_regions(np.where(lit, labels, -1))
     inside = labels >= 0
     albedo[inside] = region_albedo[ids][labels[inside]]
-    return light, albedo, lit, labels, regions
+    return light, albedo, lit, labels, len(ids)
