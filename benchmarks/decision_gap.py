@@ -38,15 +38,12 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import numpy as np  # noqa: E402
-from random_family import seeds  # noqa: E402
+from random_family import random_dataset, seeds  # noqa: E402
 
 import estimator.methods.retinex_segmented.method as retinex_method  # noqa: E402
 from estimator import InputError, estimate  # noqa: E402
 from estimator.rays.raycast import RayCaster  # noqa: E402
-from harness.io.dataset import read_dataset, read_ground_truth  # noqa: E402
 from harness.io.runs import estimator_settings  # noqa: E402
-from harness.scene.generate import generate  # noqa: E402
-from harness.scene.random_family import random_spec  # noqa: E402
 from reports import metrics  # noqa: E402
 from reports.ground_truth import evaluation_mask, true_irradiance  # noqa: E402
 
@@ -66,12 +63,8 @@ def diffuse_score(diffuse: np.ndarray, truth, mask: np.ndarray) -> dict:
 
 
 def run_seed(seed: int, out: str) -> dict:
-    folder = os.path.join(out, f"random-{seed:04d}")
-    if not os.path.isdir(folder):
-        generate(random_spec(seed), folder)
-    ds = read_dataset(folder, load_test=False, load_truth=False)
+    ds, truth = random_dataset(seed, out)
     faces = ds.data.mesh.num_faces
-    truth = read_ground_truth(folder, faces)
     fits = []
     choose = retinex_method.choose
 
@@ -158,6 +151,7 @@ def main() -> None:
           f"with the best hypothesis offered; the decision passed over a share higher by 0.05 or more on "
           f"{np.sum(decision >= 0.05)} seeds, the coat's choice on {np.sum(coat >= 0.05)}; gross faces carry over "
           f"half the squared error on {np.sum(gross > 0.5)} seeds")
+
 
 if __name__ == "__main__":
     main()

@@ -47,13 +47,19 @@ def seeds(text: str) -> list[int]:
     return out
 
 
-def run_seed(seed: int, methods: list[str], out: str, profile: str | None,
-             overrides: dict | None = None) -> list[dict]:
+def random_dataset(seed: int, out: str, profile: str | None = None):
+    """The seed's dataset and its per-face ground truth, generated into DIR/random-NNNN once
+    (reused when the folder is there)."""
     folder = os.path.join(out, f"random-{seed:04d}")
     if not os.path.isdir(folder):
         generate(random_spec(seed, profile), folder)
     ds = read_dataset(folder, load_test=False, load_truth=False)
-    truth = read_ground_truth(folder, ds.data.mesh.num_faces)
+    return ds, read_ground_truth(folder, ds.data.mesh.num_faces)
+
+
+def run_seed(seed: int, methods: list[str], out: str, profile: str | None,
+             overrides: dict | None = None) -> list[dict]:
+    ds, truth = random_dataset(seed, out, profile)
     strata = draw(seed)[1]
     rows = []
     for method in methods:
