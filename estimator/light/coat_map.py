@@ -43,6 +43,14 @@ ROWS_PER_VERTEX = 4  # rows beyond the per-face unknowns per map vertex for a de
 # the reweighted rounds' conjugate gradients: relative residual and iteration cap
 CG_TOLERANCE = 1e-8
 CG_ITERATIONS = 200
+# after CG_PROBE iterations a channel whose residual, shrinking at the rate seen so far, would
+# reach the goal only after more than CG_DENSE_ITERATIONS is handed to its dense system. Only
+# the time depends on it (either way the map is solved to CG_TOLERANCE): at the default 32 x 64
+# map one channel's dense system, formed and factored, took 120-150 ms on the 2-core development
+# machine, as long as 40-65 iterations on the real-light family's coated members, and the rate
+# after 8 iterations foretold the count a solve took within about 30 % (mostly under it)
+CG_PROBE = 8
+CG_DENSE_ITERATIONS = 48
 
 
 @dataclass
@@ -338,17 +346,27 @@ def _conjugate_gradients(times, precondition, right, start) -> tuple[np.ndarray,
     ``right`` (K, C) by ``times[c]`` (a function of (K,)), each started at column c of ``start``,
     with one ``precondition`` (a function of (K, C)) applied to all columns at once, until each
     residual is :data:`CG_TOLERANCE` of the larger of its right side and its first residual
-    (at most :data:`CG_ITERATIONS`); and (C,) bool, which columns got there. Written here
-    because scipy's ``cg`` takes one system and one right side."""
+    (at most :data:`CG_ITERATIONS`); and (C,) bool, which columns got there. A column whose
+    residual, after :data:`CG_PROBE` iterations, shrinks so slowly that at that geometric rate
+    it would need more than :data:`CG_DENSE_ITERATIONS` in all is left there, not converged
+    (the caller's dense solve is then the cheaper). Written here because scipy's ``cg`` takes
+    one system and one right side."""
     x = start.copy()
     columns = range(right.shape[1])
     residual = right - np.stack([times[c](x[:, c]) for c in columns], axis=1)
-    goal = CG_TOLERANCE * np.maximum(np.linalg.norm(right, axis=0), np.linalg.norm(residual, axis=0))
+    first = np.linalg.norm(residual, axis=0)
+    goal = CG_TOLERANCE * np.maximum(np.linalg.norm(right, axis=0), first)
     z = precondition(residual)
     direction = z.copy()
     rz = np.sum(residual * z, axis=0)
-    for _ in range(CG_ITERATIONS):
-        active = np.linalg.norm(residual, axis=0) > goal
+    slow = np.zeros(len(goal), dtype=bool)
+    for iteration in range(CG_ITERATIONS):
+        norm = np.linalg.norm(residual, axis=0)
+        if iteration == CG_PROBE:   # the iterations a column needs at the rate seen so far
+            with np.errstate(divide="ignore", invalid="ignore"):
+                needed = np.where(norm < first, CG_PROBE * np.log(goal / first) / np.log(norm / first), np.inf)
+            slow = (norm > goal) & ~(needed <= CG_DENSE_ITERATIONS)
+        active = (norm > goal) & ~slow
         if not active.any():
             break
         product = np.stack([times[c](direction[:, c]) if active[c] else np.zeros(len(x)) for c in columns], axis=1)

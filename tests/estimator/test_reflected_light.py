@@ -9,6 +9,7 @@ from scipy import linalg, sparse
 from estimator.core import latlong, sh
 from estimator.core.errors import InputError
 from estimator.light.coat_map import (
+    CG_PROBE,
     _conjugate_gradients,
     _face_eliminated_system,
     _reweighted_solve,
@@ -257,6 +258,34 @@ def test_conjugate_gradients_solve_several_systems_side_by_side():
     assert converged.all()
     for c, m in enumerate(matrices):
         np.testing.assert_allclose(x[:, c], np.linalg.solve(m, right[:, c]), rtol=1e-6)
+
+def test_a_column_converging_too_slowly_is_left_at_the_probe():
+    """A system whose spectrum spans six decades, unpreconditioned, would need hundreds of
+    iterations: after CG_PROBE its rate says more than CG_DENSE_ITERATIONS, so it stops there
+    unconverged (the dense solve takes over); a column the preconditioner solves exactly
+    converges beside it."""
+    k = 200
+    slow = np.diag(np.logspace(0, 6, k))
+    rng = np.random.default_rng(10)
+    m = rng.normal(size=(k, k))
+    fast = m @ m.T + k * np.eye(k)
+    inverse = np.linalg.inv(fast)
+    calls = [0, 0]
+
+    def times(c, matrix):
+        def product(v):
+            calls[c] += 1
+            return matrix @ v
+        return product
+
+    right = rng.normal(size=(k, 2))
+    x, converged = _conjugate_gradients([times(0, slow), times(1, fast)],
+                                        lambda r: np.column_stack([r[:, 0], inverse @ r[:, 1]]), right,
+                                        np.zeros((k, 2)))
+    assert converged.tolist() == [False, True]
+    assert calls[0] == 1 + CG_PROBE                      # the first residual, then the probe's iterations
+    np.testing.assert_allclose(x[:, 1], np.linalg.solve(fast, right[:, 1]), rtol=1e-6)
+
 
 def test_a_channel_the_iterations_leave_short_is_solved_densely(monkeypatch):
     """With one iteration allowed, the conjugate gradients say no column converged, and the
