@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from .config import EstimatorConfig
+from .core.blas import one_blas_thread
 from .core.data import MultiViewData
 from .core.errors import InputError
 from .diagnostics import screening, trust
@@ -28,6 +29,7 @@ EXPONENT_CANDIDATES = (5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0)
 DEFAULT_METHOD = "retinex-segmented"
 
 
+@one_blas_thread
 def estimate(data: MultiViewData, method: str | None = None, config: EstimatorConfig | None = None,
              known_sh: np.ndarray | None = None, known_radiance: np.ndarray | None = None, log=None,
              exponent_candidates: tuple[float, ...] | None = None, caster: RayCaster | None = None) -> Estimate:

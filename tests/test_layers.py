@@ -16,7 +16,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # lowest first: a room may import its own modules and those of the rooms before it
 ROOMS = ("core", "rays", "model", "solvers", "light", "pipeline", "diagnostics", "methods", "config", "api",
          "__init__")
-THIRD_PARTY_IN_CORE = {"numpy", "scipy", "xatlas"}   # array math, UV unwrapping; no renderer below rays
+# array math, UV unwrapping, BLAS threads; no renderer below rays
+THIRD_PARTY_IN_CORE = {"numpy", "scipy", "xatlas", "threadpoolctl"}
 
 
 def _module_name(path: Path) -> str:

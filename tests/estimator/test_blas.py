@@ -1,0 +1,45 @@
+"""The estimate runs its dense linear algebra on one BLAS thread and gives the caller's back."""
+import numpy as np
+from threadpoolctl import threadpool_info, threadpool_limits
+
+import estimator.api as api
+from estimator import estimate
+from estimator.core.blas import one_blas_thread
+
+from .micro import micro_config, micro_scene
+
+
+def blas_threads() -> list[int]:
+    return [info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"]
+
+
+def test_one_blas_thread_inside_and_the_callers_limit_after():
+    seen = []
+
+    @one_blas_thread
+    def work(x):
+        seen.extend(blas_threads())
+        return x @ x.T
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        out = work(np.eye(3))
+        assert blas_threads() == before
+    assert seen and set(seen) == {1}
+    np.testing.assert_array_equal(out, np.eye(3))
+
+
+def test_the_estimate_solves_on_one_blas_thread(monkeypatch):
+    """The method's solve (inside :func:`estimate`) sees one BLAS thread."""
+    seen = []
+    solve = api._solve
+
+    def spy(*args, **kwargs):
+        seen.extend(blas_threads())
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(api, "_solve", spy)
+    data, _ = micro_scene()
+    with threadpool_limits(limits=2, user_api="blas"):
+        estimate(data, "retinex-segmented", micro_config())
+    assert seen and set(seen) == {1}
