@@ -96,7 +96,9 @@ class ReflectedLight:
     determined : at least :data:`ROWS_PER_VERTEX` rows per vertex beyond the faces' own
         unknowns. A map with fewer rows than that fits the noise: it explains nearly all of
         the view changes whatever the light (30 views of 256² on a 5,120-face object give about
-        10 rows per vertex; 12 views of 80², under one).
+        10 rows per vertex; 12 views of 80², under one). Such a map is not fitted, nor one
+        whose first system is not positive definite in floating point: its radiance is 0, its
+        diffuse NaN and its ``explained`` 0.
     """
 
     radiance: np.ndarray
@@ -207,15 +209,23 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
     rows = len(face)
     if rows == 0:
         raise InputError("no observation sees the light reflected by the coat (every mirror direction is blocked)")
+    cells = height * width
+    spare = rows - len(np.unique(face))
+    undetermined = ReflectedLight(np.zeros((height, width, 3)), np.full((n_faces, 3), np.nan), np.zeros(3), rows,
+                                  False)
+    if spare < ROWS_PER_VERTEX * cells:   # too few rows to determine the map: not fitted (it would fit the noise)
+        return undetermined
     transmit = 1.0 - fresnel
     a = (sparse.diags(fresnel) @ bilinear_rows(mirror, height, width)).tocsr()   # (N, H*W)
     b = sparse.csr_matrix((transmit, (np.arange(rows), face)), shape=(rows, n_faces))
     smooth = map_differences(height, width)
-    cells = height * width
     ridge = smoothness * (smooth.T @ smooth) + 1e-9 * sparse.identity(cells)   # (cells, cells), per unit level
     # the first round weighs every row alike: one dense system for the three channels, factored
     system, right, faces_fit = _face_eliminated_system(a, b, rgb, np.ones(rows))
-    first = _factored(system, ridge)
+    try:
+        first = _factored(system, ridge)
+    except np.linalg.LinAlgError:   # not positive definite in floating point: the rows do not determine it
+        return undetermined
     light = linalg.cho_solve(first, right, check_finite=False)
     residuals, projections = faces_fit(light), faces_fit(np.zeros_like(light))
     diffuse = np.full((n_faces, 3), np.nan)
@@ -236,9 +246,7 @@ def fit_reflected_light(face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
         denominator = np.bincount(face, weight * transmit ** 2, minlength=n_faces)
         seen = denominator > 0
         diffuse[seen, c] = (b.T @ (weight * (rgb[:, c] - a @ light[:, c])))[seen] / denominator[seen]
-    spare = rows - len(np.unique(face))
-    return ReflectedLight(light.reshape(height, width, 3), diffuse, explained, rows,
-                          spare >= ROWS_PER_VERTEX * cells)
+    return ReflectedLight(light.reshape(height, width, 3), diffuse, explained, rows, True)
 
 
 def diffuse_radiance(fitted: ReflectedLight, face: np.ndarray, rgb: np.ndarray, view_dir: np.ndarray,
@@ -296,7 +304,8 @@ def _reweighted_solve(a, b, values, weights, ridge, first, start):
     reweighted one and a few iterations replace a dense factorisation per channel (K = 2048:
     75 ms each); the channels' iterations run side by side, so that each pass over the factor
     serves all of them. A channel the iterations leave short of :data:`CG_TOLERANCE` is solved
-    by its dense system, formed and factored."""
+    by its dense system, formed and factored (by least squares where, its rows' weights nearly
+    nil, the factorisation fails in floating point)."""
     channels = values.shape[1]
     k = a.shape[1]
     times, right, fits = [], np.zeros((k, channels)), []
@@ -320,7 +329,12 @@ def _reweighted_solve(a, b, values, weights, ridge, first, start):
                                              right, start)
     for c in np.nonzero(~converged)[0]:
         system, right_c, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])
-        fitted[:, c] = linalg.cho_solve(_factored(system, ridge), right_c, check_finite=False)
+        try:
+            fitted[:, c] = linalg.cho_solve(_factored(system, ridge), right_c, check_finite=False)
+        except np.linalg.LinAlgError:   # rows the weights nearly remove leave it singular in floating point
+            system, right_c, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])
+            system += max(np.trace(system) / k, 1e-300) * ridge.toarray()
+            fitted[:, c] = linalg.lstsq(system, right_c, check_finite=False)[0]
     residuals = np.stack([fit(fitted[:, c]) for c, fit in enumerate(fits)], axis=1)
     projections = np.stack([fit(np.zeros(k)) for fit in fits], axis=1)
     return fitted, residuals, projections

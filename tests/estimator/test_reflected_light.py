@@ -149,9 +149,39 @@ def test_blocked_mirror_directions_are_left_out():
 
 
 def test_the_determined_flag_needs_rows_per_vertex():
+    """A map the rows cannot determine is not fitted (its dense system, nearly singular, failed
+    to factor on 4-6 views): radiance 0, diffuse NaN, nothing explained."""
     face, rgb, view_dir, normals, sampling, vis, _ = _rows(_smooth_map(), faces=300, views=12)
-    assert not fit_reflected_light(face, rgb, view_dir, normals, sampling, vis).determined      # 32 x 64: too few
-    assert fit_reflected_light(face, rgb, view_dir, normals, sampling, vis, height=4, width=8).determined
+    few = fit_reflected_light(face, rgb, view_dir, normals, sampling, vis)     # 32 x 64: too few rows
+    assert not few.determined
+    assert not few.radiance.any() and np.isnan(few.diffuse).all() and not few.explained.any()
+    fitted = fit_reflected_light(face, rgb, view_dir, normals, sampling, vis, height=4, width=8)
+    assert fitted.determined and fitted.explained.min() > 0.5
+
+
+def test_a_channel_whose_dense_factorisation_fails_is_solved_by_least_squares(monkeypatch):
+    """Where the dense fallback's Cholesky fails (rows whose weights nearly vanish), that channel's
+    map is the least-squares solution of the same system, not an error."""
+    rng = np.random.default_rng(11)
+    rows, faces, cells = 300, 30, 20
+    face = rng.integers(0, faces, rows)
+    a = sparse.csr_matrix(rng.random((rows, cells)) * (rng.random((rows, cells)) < 0.3))
+    b = sparse.csr_matrix((0.5 + rng.random(rows), (np.arange(rows), face)), shape=(rows, faces))
+    ridge = 1e-2 * sparse.identity(cells)
+    values, weights = rng.normal(size=(rows, 3)), rng.uniform(0.05, 1.0, size=(rows, 3))
+    system, _, _ = _face_eliminated_system(a, b, values, np.ones(rows))
+    first = linalg.cho_factor(system + np.trace(system) / cells * ridge.toarray())
+    monkeypatch.setattr("estimator.light.coat_map.CG_ITERATIONS", 1)
+
+    def failing(system, ridge):
+        raise np.linalg.LinAlgError("1-th leading minor of the array is not positive definite")
+
+    monkeypatch.setattr("estimator.light.coat_map._factored", failing)
+    light, _, _ = _reweighted_solve(a, b, values, weights, ridge, first, np.zeros((cells, 3)))
+    for c in range(3):
+        dense, right, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])
+        expected = np.linalg.solve(dense + np.trace(dense) / cells * ridge.toarray(), right)
+        np.testing.assert_allclose(light[:, c], expected, rtol=1e-8, atol=1e-11 * np.abs(expected).max())
 
 
 def test_sky_and_sun_cuts_the_brightest_compact_source():

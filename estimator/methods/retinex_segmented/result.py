@@ -56,7 +56,8 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     info = {"clusters": int(len(np.unique(group[observed]))), "uniform_regions": regions,
             "uniform_share": h.share, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
             "sun": sun_info, "light_from": h.source.value, "region_deviation": h.deviation, "region_drift": h.drift,
-            "reflection_explained": None if fits.coat_map is None else fits.coat_map.explained.tolist(),
+            "reflection_explained": (fits.coat_map.explained.tolist() if fits.coat_map is not None
+                                     and fits.coat_map.determined else None),
             "lobe_explained": None if fits.lobe is None else fits.lobe[0].explained.tolist(),
             "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)),
                                    "unknowns": int(3 * (regions + free_seen + specular_groups + light.shape[0] - 1))}}
