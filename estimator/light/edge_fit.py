@@ -173,9 +173,10 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     regions = int(labels.max()) + 1 if len(member) else 0
     if len(i) + len(member) == 0:
         raise InputError("the light fit needs two usable neighbouring faces or a uniform region")
+    unit = radiance_unit(radiance, usable) if indirect is not None else np.ones(channels)
     light = np.zeros((m, channels)) if initial is None else np.array(initial[:m], dtype=float)
     if initial is None:
-        light[0] = 1.0
+        light[0] = unit     # a DC of 1 in the fit's unit
     if indirect is None:
         light = unit_dc(light)[0]
     with np.errstate(divide="ignore"):
@@ -199,9 +200,11 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     columns = np.ascontiguousarray(rows[:, (1 if indirect is None else 0):])
     by_region = _region_pattern(member, group, regions, len(faces))
     for c in range(channels):
-        light[:, c], albedo[:, c] = _fit_channel(log_radiance[faces, c], rows, columns, graph, member, group,
-                                                 by_region, regions, light[:, c], usable[faces], loss, penalty,
-                                                 iterations, None if indirect is None else indirect[faces, c])
+        extra = None if indirect is None else indirect[faces, c] / unit[c]
+        fitted, albedo[:, c] = _fit_channel(log_radiance[faces, c] - np.log(unit[c]), rows, columns, graph, member,
+                                            group, by_region, regions, light[:, c] / unit[c], usable[faces], loss,
+                                            penalty, iterations, extra)
+        light[:, c] = fitted * unit[c]
     missing = np.bincount(group, minlength=regions) == 0
     if missing.any():   # regions whose faces were not drawn: the median under the fitted light
         tied = np.nonzero(usable & missing[np.maximum(labels, 0)] & (labels >= 0))[0]
@@ -209,6 +212,18 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
         medians = group_quantile(labels[tied], log_radiance[tied] - np.log(shade), regions, 0.5, interpolate=True)
         albedo[missing] = medians[missing]
     return light, np.exp(albedo)
+
+
+def radiance_unit(radiance: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """(C,) the unit a fit with an additive shading runs in: each channel's median radiance over
+    the ``usable`` faces (1 where that is not positive). With the indirect term the light has the
+    radiance's unit, and the fit's start (a DC of 1) and its steps along the light's scale, which
+    only the faint indirect term fixes, depend on that unit: images scaled by 1e-5 started a light
+    10^10 times too bright, whose shape no step moved. In this unit (the radiance, the indirect
+    term, linear in it, and a given start divided by it) the fit is the same for images of any
+    scale, and its light is scaled back."""
+    level = np.array([np.median(radiance[usable, c]) if usable.any() else 1.0 for c in range(radiance.shape[1])])
+    return np.where(np.isfinite(level) & (level > 0), level, 1.0)
 
 
 def _fit_channel(ell, c_matrix, columns, graph, member, group, by_region, regions, light, usable, loss, penalty,

@@ -123,6 +123,26 @@ def test_an_additive_indirect_shading_fixes_the_scale():
     np.testing.assert_allclose(fit, light, rtol=1e-3, atol=1e-4)
 
 
+@pytest.mark.parametrize("scale", [1e-7, 1e-3, 1e4])
+def test_with_an_indirect_term_images_of_any_scale_give_the_same_fit_scaled(scale):
+    """The indirect term is linear in the radiance, so radiance and term scaled by s scale the
+    light by s and leave the regions' albedos: the fit runs in each channel's radiance unit
+    (before, images at 1e-5 started a light 10^10 times too bright, whose shape never moved)."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    extra = 0.01 * (1 + 0.5 * np.sin(np.arange(len(radiance))))[:, None] * np.ones(3)
+    radiance = albedo * (c_matrix @ light + extra)
+    usable = np.ones(len(radiance), bool)
+    fit, regions = log_shading_fit(radiance, c_matrix, edges, usable, labels, indirect=extra)
+    scaled, scaled_regions = log_shading_fit(radiance * scale, c_matrix, edges, usable, labels,
+                                             initial=None, indirect=extra * scale)
+    np.testing.assert_allclose(scaled / scale, fit, rtol=1e-6, atol=1e-9 * np.abs(fit).max())
+    np.testing.assert_allclose(scaled_regions, regions, rtol=1e-6)
+    # a start given in the radiance's unit is scaled with it
+    started, _ = log_shading_fit(radiance * scale, c_matrix, edges, usable, labels, initial=fit * scale,
+                                 indirect=extra * scale)
+    np.testing.assert_allclose(started / scale, fit, rtol=1e-5, atol=1e-8 * np.abs(fit).max())
+
+
 def test_the_ridge_weighs_the_light_relative_to_its_dc():
     """A faint indirect term (1-1.5 % of the direct) fixes the light's scale only weakly: the
     ridge must weigh the light's shape as it does without that term (relative to the DC),
