@@ -213,8 +213,9 @@ def check_transparent(views: list[View], min_alpha: float) -> None:
     clear = [view.name for view in views if view.alpha is not None and not np.any(view.alpha >= min_alpha)]
     if clear:
         raise InputError(f"{len(clear)} view(s) are fully transparent (alpha below {min_alpha} everywhere): "
-                         f"{', '.join(clear[:5])}{' ...' if len(clear) > 5 else ''}; check their alpha channel "
-                         "or drop them from the dataset")
+                         f"{', '.join(clear[:5])}{' ...' if len(clear) > 5 else ''}: the object is outside their "
+                         "frame (check the mesh's position and scale against the cameras) or their alpha channel "
+                         "is empty (check it, or drop them from the dataset)")
 
 
 def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = ObservationConfig.min_pixels,

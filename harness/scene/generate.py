@@ -147,8 +147,13 @@ LDR_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tga", ".ppm")
 
 
 def cameras_inside(mesh: TriangleMesh, cameras: list[Camera]) -> list[int]:
-    """Indices of the cameras whose centre lies inside the (closed) mesh: the first face
-    a ray from the centre towards the mesh's centroid hits is seen from behind."""
+    """Indices of the cameras whose centre lies inside the mesh: the first face a ray from the
+    centre towards the mesh's centroid hits is seen from behind. Only a closed mesh (every edge
+    shared by two faces) has an inside: an open one (a shell, a mesh with holes) gives none, as
+    a camera looking into its open side sees a back face from outside."""
+    edges = np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    if np.any(np.unique(edges, axis=0, return_counts=True)[1] != 2):
+        return []
     centres = np.array([c.center for c in cameras])
     target = mesh.vertices.mean(axis=0)
     dirs = target[None] - centres
@@ -186,6 +191,11 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         train = scene.render(train_cams, desc=f"{spec.name} train")
         test = scene.render(test_cams, desc=f"{spec.name} test")
         t2 = time.perf_counter()
+        empty = [i for i, image in enumerate(train) if not np.any(image[..., 3] > 0)]
+        if empty:
+            say(f"warning: {len(empty)} of {len(train)} training views show nothing of the object (first: view "
+                f"{empty[0]}): the mesh lies outside their frame; check its position and scale against "
+                f"cameras.distance {spec.cameras.distance}")
         meta = {"scene": spec.name, "generator": "pseudolight", "variant": backend.active_variant(),
                 "spp": spec.render.spp, "seed": spec.seed, "estimator_defaults": spec.estimator}
         if spec.cameras.lens() is not None:   # the images are as the lens recorded them: readers undistort them

@@ -427,6 +427,34 @@ def test_cameras_inside_the_mesh_warn(tmp_path, capsys):
     assert "7 of 7 cameras lie inside the mesh" in capsys.readouterr().err
 
 
+def test_views_that_show_nothing_of_the_object_warn_and_estimate_names_the_framing(tmp_path, capsys):
+    """An object far smaller than a pixel (or outside the frame) renders nothing: generate says
+    so, and estimate's refusal names the framing beside the alpha channel."""
+    spec = tmp_path / "speck.toml"
+    spec.write_text(open(MICRO).read().replace("subdivisions = 1", "subdivisions = 1\nradius = 1e-5"))
+    assert main(["generate", str(spec), "-o", str(tmp_path / "d")]) == 0
+    assert "6 of 6 training views show nothing of the object" in capsys.readouterr().err
+    expect_error(capsys, ["estimate", str(tmp_path / "d"), "-o", str(tmp_path / "r")],
+                 "outside their frame", "position and scale", inputs=[tmp_path / "d"], absent=[tmp_path / "r"])
+
+
+def test_an_open_mesh_has_no_inside():
+    """A camera looking into an open shell sees a back face from outside: only a closed mesh
+    has an inside to warn about."""
+    import trimesh
+
+    from estimator import Camera, TriangleMesh, look_at
+    from harness.scene.generate import cameras_inside
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    closed = TriangleMesh(np.asarray(sphere.vertices), np.asarray(sphere.faces))
+    upper = sphere.faces[np.asarray(sphere.vertices)[sphere.faces].mean(axis=1)[:, 1] > 0]   # an open cap
+    shell = TriangleMesh(np.asarray(sphere.vertices), upper)
+    below = Camera(look_at([0.0, -3.0, 0.01], [0.0, 0.0, 0.0]), 20.0, 20.0, 8.0, 8.0, 16, 16)   # into the open side
+    centre = Camera(look_at([0.0, 0.0, 0.01], [0.0, 1.0, 0.0]), 20.0, 20.0, 8.0, 8.0, 16, 16)
+    assert cameras_inside(closed, [below, centre]) == [1]
+    assert cameras_inside(shell, [below, centre]) == []
+
+
 def test_stale_partial_folders_are_removed(copy, tmp_path, capsys):
     ds, _, _ = copy
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
