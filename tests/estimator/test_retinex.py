@@ -143,6 +143,20 @@ def test_with_an_indirect_term_images_of_any_scale_give_the_same_fit_scaled(scal
     np.testing.assert_allclose(started / scale, fit, rtol=1e-5, atol=1e-8 * np.abs(fit).max())
 
 
+def test_an_indirect_term_nil_on_every_face_leaves_the_dc_the_gauge():
+    """A convex object reflects nothing onto itself: a term that is 0 on every usable face
+    fixes no scale, so the fit is the one without it (unit DC); fitted as free, the DC drifted
+    towards 0 and a cube's creases were read as albedo edges."""
+    c_matrix, edges, labels, albedo, light, radiance = _grid()
+    usable = np.ones(len(radiance), bool)
+    start = 2.0 * light           # started off the unit DC: only the gauge brings it back
+    nil, _ = log_shading_fit(radiance, c_matrix, edges, usable, labels, initial=start,
+                             indirect=np.zeros_like(radiance))
+    plain, _ = log_shading_fit(radiance, c_matrix, edges, usable, labels, initial=start)
+    np.testing.assert_array_equal(nil, plain)
+    np.testing.assert_allclose(nil[0], 1.0)
+
+
 def test_the_ridge_weighs_the_light_relative_to_its_dc():
     """A faint indirect term (1-1.5 % of the direct) fixes the light's scale only weakly: the
     ridge must weigh the light's shape as it does without that term (relative to the DC),
