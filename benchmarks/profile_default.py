@@ -6,7 +6,7 @@ Each dataset (a folder ``pseudolight generate`` wrote, e.g. one of ``real_light.
 estimated once with its own defaults under cProfile. Prints the estimate's stage timings
 (``run.json``'s ``timings``) and the ``--top`` functions of the project and of NumPy/SciPy's
 linear algebra by cumulative time, with their call counts. Run it alone: a loaded machine
-inflates the multithreaded BLAS products most (OpenBLAS threads wait on each other).
+inflates every stage (the estimate's BLAS runs on one thread, Dr.Jit's ray tracing on all).
 """
 from __future__ import annotations
 

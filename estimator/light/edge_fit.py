@@ -136,7 +136,9 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
         shading by more than :data:`SHADING_TOLERANCE`).
     indirect : (F, C) shading added to C L (light the object reflects onto itself,
         :mod:`estimator.light.indirect`); it fixes the light's scale, so the DC is fitted too
-        and the ridge weighs the coefficients over the DC (the shape, as without it).
+        (each channel in the unit of its median usable radiance, :func:`radiance_unit`) and the
+        ridge weighs the coefficients over the DC (the shape, as without it). A term nil on
+        every usable face (a convex object) fixes no scale and is dropped: unit DC.
     max_edges : beyond this many usable edges the fit runs on this many drawn at random
         (seed 0) and on the region rows of their faces only; a region none of whose faces is
         drawn takes the median of its faces' log radiance over log shading under the light.
@@ -144,7 +146,7 @@ def log_shading_fit(radiance: np.ndarray, c_matrix: np.ndarray, edges: np.ndarra
     Returns
     -------
     light : (M, C) light with unit DC per channel (the scale is a gauge), or at its own
-        scale with ``indirect``.
+        scale with an ``indirect`` term that is not nil.
     region_albedo : (R, C) albedo of each region (R = labels.max() + 1; (0, C) without labels).
     """
     f, m = c_matrix.shape
@@ -227,8 +229,13 @@ def radiance_unit(radiance: np.ndarray, usable: np.ndarray) -> np.ndarray:
     10^10 times too bright, whose shape no step moved. In this unit (the radiance, the indirect
     term, linear in it, and a given start divided by it) the fit is the same for images of any
     scale, and its light is scaled back."""
-    level = np.array([np.median(radiance[usable, c]) if usable.any() else 1.0 for c in range(radiance.shape[1])])
-    return np.where(np.isfinite(level) & (level > 0), level, 1.0)
+    level = np.ones(radiance.shape[1])
+    for c in range(radiance.shape[1]):
+        values = radiance[usable, c]
+        values = values[np.isfinite(values)]
+        if len(values):
+            level[c] = np.median(values)
+    return np.where(level > 0, level, 1.0)
 
 
 def _fit_channel(ell, c_matrix, columns, graph, member, group, by_region, regions, light, usable, loss, penalty,

@@ -148,11 +148,16 @@ LDR_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tga", ".ppm")
 
 def cameras_inside(mesh: TriangleMesh, cameras: list[Camera]) -> list[int]:
     """Indices of the cameras whose centre lies inside the mesh: the first face a ray from the
-    centre towards the mesh's centroid hits is seen from behind. Only a closed mesh (every edge
-    shared by two faces) has an inside: an open one (a shell, a mesh with holes) gives none, as
-    a camera looking into its open side sees a back face from outside."""
-    edges = np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    if np.any(np.unique(edges, axis=0, return_counts=True)[1] != 2):
+    centre towards the mesh's centroid hits is seen from behind. Only a closed mesh has an
+    inside: an open one (a shell, a mesh with holes) gives none, as a camera looking into its
+    open side sees a back face from outside. Closed is judged on the surface, not the vertex
+    list: vertices at one position are one (an STL file repeats them per face), a face listed
+    twice counts once, and every edge must then border an even number of faces (two, or a
+    non-manifold edge's four)."""
+    _, corner = np.unique(np.round(mesh.vertices, 9), axis=0, return_inverse=True)
+    faces = np.unique(np.sort(corner.reshape(-1)[mesh.faces], axis=1), axis=0)
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    if np.any(np.unique(edges, axis=0, return_counts=True)[1] % 2):
         return []
     centres = np.array([c.center for c in cameras])
     target = mesh.vertices.mean(axis=0)
@@ -194,8 +199,8 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         empty = [i for i, image in enumerate(train) if not np.any(image[..., 3] > 0)]
         if empty:
             say(f"warning: {len(empty)} of {len(train)} training views show nothing of the object (first: view "
-                f"{empty[0]}): the mesh lies outside their frame; check its position and scale against "
-                f"cameras.distance {spec.cameras.distance}")
+                f"{empty[0]}): the mesh lies outside their frame or covers no pixel; check its position and scale "
+                f"against cameras.distance {spec.cameras.distance}")
         meta = {"scene": spec.name, "generator": "pseudolight", "variant": backend.active_variant(),
                 "spp": spec.render.spp, "seed": spec.seed, "estimator_defaults": spec.estimator}
         if spec.cameras.lens() is not None:   # the images are as the lens recorded them: readers undistort them

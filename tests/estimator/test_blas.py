@@ -43,3 +43,43 @@ def test_the_estimate_solves_on_one_blas_thread(monkeypatch):
     with threadpool_limits(limits=2, user_api="blas"):
         estimate(data, "retinex-segmented", micro_config())
     assert seen and set(seen) == {1}
+
+
+def test_overlapping_limited_calls_share_one_limit_and_restore_it_once(monkeypatch):
+    """Two limited calls in two threads, the first returning while the second runs: one limit
+    is set (when the first enters) and restored once (when the last leaves), so the second does
+    not lose it midway and the process does not keep it after."""
+    import threading
+
+    import estimator.core.blas as blas
+
+    made = []
+    real = blas.threadpool_limits
+
+    def counted(*args, **kwargs):
+        made.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(blas, "threadpool_limits", counted)
+    first_done, second_started = threading.Event(), threading.Event()
+    depth = {}
+
+    @one_blas_thread
+    def first():
+        second_started.wait(10)
+
+    @one_blas_thread
+    def second():
+        second_started.set()
+        first_done.wait(10)
+        depth["second"] = blas._held["depth"]
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        a, b = threading.Thread(target=first), threading.Thread(target=second)
+        a.start(), b.start()
+        a.join()
+        first_done.set()
+        b.join()
+        assert made == [1] and depth["second"] == 1      # the first's exit left the limit in place
+        assert blas._held == {"depth": 0, "limits": None} and blas_threads() == before

@@ -453,6 +453,10 @@ def test_an_open_mesh_has_no_inside():
     centre = Camera(look_at([0.0, 0.0, 0.01], [0.0, 1.0, 0.0]), 20.0, 20.0, 8.0, 8.0, 16, 16)
     assert cameras_inside(closed, [below, centre]) == [1]
     assert cameras_inside(shell, [below, centre]) == []
+    # closed all the same: every face with its own copies of its vertices (as an STL file), a face twice
+    corners = np.asarray(sphere.vertices)[np.asarray(sphere.faces)].reshape(-1, 3)
+    unshared = TriangleMesh(corners, np.vstack([np.arange(len(corners)).reshape(-1, 3), [[0, 1, 2]]]))
+    assert cameras_inside(unshared, [below, centre]) == [1]
 
 
 def test_stale_partial_folders_are_removed(copy, tmp_path, capsys):

@@ -41,7 +41,9 @@ def coat_level(h: Hypothesis, edges: np.ndarray, reached: np.ndarray, transfer: 
 
     The level's colour (:func:`level_from_edges`) is the median shading's under each round's
     light: with ``transfer`` the light is at its own scale, whose colour is the environment's,
-    the colour a dielectric or a white lobe reflects.
+    the colour a dielectric or a white lobe reflects (on a convex object, where the transfer
+    reflects nothing, the light keeps a unit DC per channel and the level the unit-DC
+    shading's colour).
 
     Returns
     -------
