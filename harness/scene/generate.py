@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from estimator import Camera, RayCaster, TriangleMesh, backend, fresnel_dielectric
+from estimator import Camera, EstimatorConfig, RayCaster, TriangleMesh, backend, fresnel_dielectric
 from harness.io.atomic import atomic_directory
 from harness.io.dataset import write_dataset, write_ground_truth
 from harness.io.images import read_linear_rgb
@@ -196,11 +196,14 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         train = scene.render(train_cams, desc=f"{spec.name} train")
         test = scene.render(test_cams, desc=f"{spec.name} test")
         t2 = time.perf_counter()
-        empty = [i for i, image in enumerate(train) if not np.any(image[..., 3] > 0)]
+        # a view with no pixel the object covers wholly (the estimator's min_coverage) gives it nothing
+        covered = spec.estimator.get("min_coverage", EstimatorConfig().min_coverage)
+        empty = [i for i, image in enumerate(train) if not np.any(image[..., 3] >= covered)]
         if empty:
-            say(f"warning: {len(empty)} of {len(train)} training views show nothing of the object (first: view "
-                f"{empty[0]}): the mesh lies outside their frame or covers no pixel; check its position and scale "
-                f"against cameras.distance {spec.cameras.distance}")
+            say(f"warning: {len(empty)} of {len(train)} training views show no pixel wholly covered by the object "
+                f"(first: view {empty[0]}): the mesh lies outside their frame or is smaller than a pixel, and the "
+                f"estimate will refuse them; check its position and scale against cameras.distance "
+                f"{spec.cameras.distance}")
         meta = {"scene": spec.name, "generator": "pseudolight", "variant": backend.active_variant(),
                 "spp": spec.render.spp, "seed": spec.seed, "estimator_defaults": spec.estimator}
         if spec.cameras.lens() is not None:   # the images are as the lens recorded them: readers undistort them

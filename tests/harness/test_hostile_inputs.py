@@ -433,7 +433,7 @@ def test_views_that_show_nothing_of_the_object_warn_and_estimate_names_the_frami
     spec = tmp_path / "speck.toml"
     spec.write_text(open(MICRO).read().replace("subdivisions = 1", "subdivisions = 1\nradius = 1e-5"))
     assert main(["generate", str(spec), "-o", str(tmp_path / "d")]) == 0
-    assert "6 of 6 training views show nothing of the object" in capsys.readouterr().err
+    assert "6 of 6 training views show no pixel wholly covered by the object" in capsys.readouterr().err
     expect_error(capsys, ["estimate", str(tmp_path / "d"), "-o", str(tmp_path / "r")],
                  "outside their frame", "position and scale", inputs=[tmp_path / "d"], absent=[tmp_path / "r"])
 
