@@ -332,20 +332,23 @@ def _reweighted_solve(a, b, values, weights, ridge, first, start):
         try:
             fitted[:, c] = linalg.cho_solve(_factored(system, ridge), right_c, check_finite=False)
         except np.linalg.LinAlgError:   # rows the weights nearly remove leave it singular in floating point
-            system, right_c, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])
-            system += max(np.trace(system) / k, 1e-300) * ridge.toarray()
-            fitted[:, c] = linalg.lstsq(system, right_c, check_finite=False)[0]
+            system, right_c, _ = _face_eliminated_system(a, b, values[:, c], weights[:, c])   # the factor overwrote it
+            fitted[:, c] = linalg.lstsq(_with_ridge(system, ridge), right_c, check_finite=False)[0]
     residuals = np.stack([fit(fitted[:, c]) for c, fit in enumerate(fits)], axis=1)
     projections = np.stack([fit(np.zeros(k)) for fit in fits], axis=1)
     return fitted, residuals, projections
 
 
-def _factored(system: np.ndarray, ridge: sparse.spmatrix):
-    """The Cholesky factor of the dense map system (K, K) plus its mean diagonal times ``ridge``
-    (K, K) sparse (overwrites ``system``): symmetric positive definite, the ridge keeps it so
-    (Cholesky takes two thirds of LU's time)."""
+def _with_ridge(system: np.ndarray, ridge: sparse.spmatrix) -> np.ndarray:
+    """The dense map system (K, K) plus its mean diagonal times ``ridge`` (K, K) sparse, in place."""
     system += max(np.trace(system) / system.shape[0], 1e-300) * ridge.toarray()
-    return linalg.cho_factor(system, overwrite_a=True, check_finite=False)
+    return system
+
+
+def _factored(system: np.ndarray, ridge: sparse.spmatrix):
+    """The Cholesky factor of :func:`_with_ridge` of the dense map system (overwrites ``system``):
+    symmetric positive definite, the ridge keeps it so (Cholesky takes two thirds of LU's time)."""
+    return linalg.cho_factor(_with_ridge(system, ridge), overwrite_a=True, check_finite=False)
 
 
 def _faces_refitted(a, b, values, weights, inverse, light):

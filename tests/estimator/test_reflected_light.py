@@ -159,11 +159,10 @@ def test_the_determined_flag_needs_rows_per_vertex():
     assert fitted.determined and fitted.explained.min() > 0.5
 
 
-def test_a_channel_whose_dense_factorisation_fails_is_solved_by_least_squares(monkeypatch):
-    """Where the dense fallback's Cholesky fails (rows whose weights nearly vanish), that channel's
-    map is the least-squares solution of the same system, not an error."""
-    rng = np.random.default_rng(11)
-    rows, faces, cells = 300, 30, 20
+def _small_round(seed: int, rows: int = 300, faces: int = 30, cells: int = 20):
+    """A small reweighted round's inputs: sparse rows a (N, K), one transmission per row b (N, F),
+    a ridge, values and weights (N, 3), the Cholesky factor of the evenly weighted system and K."""
+    rng = np.random.default_rng(seed)
     face = rng.integers(0, faces, rows)
     a = sparse.csr_matrix(rng.random((rows, cells)) * (rng.random((rows, cells)) < 0.3))
     b = sparse.csr_matrix((0.5 + rng.random(rows), (np.arange(rows), face)), shape=(rows, faces))
@@ -171,6 +170,13 @@ def test_a_channel_whose_dense_factorisation_fails_is_solved_by_least_squares(mo
     values, weights = rng.normal(size=(rows, 3)), rng.uniform(0.05, 1.0, size=(rows, 3))
     system, _, _ = _face_eliminated_system(a, b, values, np.ones(rows))
     first = linalg.cho_factor(system + np.trace(system) / cells * ridge.toarray())
+    return a, b, ridge, values, weights, first, system, cells
+
+
+def test_a_channel_whose_dense_factorisation_fails_is_solved_by_least_squares(monkeypatch):
+    """Where the dense fallback's Cholesky fails (rows whose weights nearly vanish), that channel's
+    map is the least-squares solution of the same system, not an error."""
+    a, b, ridge, values, weights, first, _, cells = _small_round(11)
     monkeypatch.setattr("estimator.light.coat_map.CG_ITERATIONS", 1)
 
     def failing(system, ridge):
@@ -321,15 +327,7 @@ def test_a_channel_the_iterations_leave_short_is_solved_densely(monkeypatch):
     """With one iteration allowed, the conjugate gradients say no column converged, and the
     reweighted round solves those channels by their dense systems: the maps still equal the
     dense solve's."""
-    rng = np.random.default_rng(9)
-    rows, faces, cells = 300, 30, 20
-    face = rng.integers(0, faces, rows)
-    a = sparse.csr_matrix(rng.random((rows, cells)) * (rng.random((rows, cells)) < 0.3))
-    b = sparse.csr_matrix((0.5 + rng.random(rows), (np.arange(rows), face)), shape=(rows, faces))
-    ridge = 1e-2 * sparse.identity(cells)
-    values, weights = rng.normal(size=(rows, 3)), rng.uniform(0.05, 1.0, size=(rows, 3))
-    system, _, _ = _face_eliminated_system(a, b, values, np.ones(rows))
-    first = linalg.cho_factor(system + np.trace(system) / cells * ridge.toarray())
+    a, b, ridge, values, weights, first, system, cells = _small_round(9)
     monkeypatch.setattr("estimator.light.coat_map.CG_ITERATIONS", 1)
     _, converged = _conjugate_gradients([lambda v: system @ v] * 3, lambda r: r, values[:cells], np.zeros((cells, 3)))
     assert not converged.any()
