@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from .config import EstimatorConfig
-from .core.blas import one_blas_thread
+from .core.blas import limited_blas
 from .core.data import MultiViewData
 from .core.errors import InputError
 from .diagnostics import screening, trust
@@ -29,7 +29,6 @@ EXPONENT_CANDIDATES = (5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0)
 DEFAULT_METHOD = "retinex-segmented"
 
 
-@one_blas_thread
 def estimate(data: MultiViewData, method: str | None = None, config: EstimatorConfig | None = None,
              known_sh: np.ndarray | None = None, known_radiance: np.ndarray | None = None, log=None,
              exponent_candidates: tuple[float, ...] | None = None, caster: RayCaster | None = None) -> Estimate:
@@ -47,8 +46,19 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
         (``specular_model='lobe'`` or ``diffuse_light='defiltered'``).
     caster : ray queries of ``data.mesh`` already built (None: built here), whose face-ID
         buffers of cameras it has traced before are reused (the pose refinement passes its own).
+
+    The whole estimate runs with BLAS limited to ``config.blas_threads`` threads
+    (:mod:`estimator.core.blas`).
     """
     config = config or EstimatorConfig()
+    with limited_blas(config.blas_threads):
+        return _estimate(data, method, config, known_sh, known_radiance, log, exponent_candidates, caster)
+
+
+def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, known_sh: np.ndarray | None,
+              known_radiance: np.ndarray | None, log, exponent_candidates: tuple[float, ...] | None,
+              caster: RayCaster | None) -> Estimate:
+    """:func:`estimate`'s body, its BLAS limit set."""
     cls = get_method(DEFAULT_METHOD if method is None else method)
     t0 = time.perf_counter()
     poses, rounds, offsets = None, config.pose_rounds, None

@@ -32,19 +32,26 @@ _chosen: str | None = None
 
 @dataclass
 class BackendConfig(Section):
-    """The Mitsuba variant of the ray queries.
+    """Where the work runs: the Mitsuba variant of the ray queries and the threads of the
+    estimate's dense linear algebra.
 
     Attributes
     ----------
     variant : 'cuda_ad_rgb' or 'llvm_ad_rgb'; None: CUDA when a GPU is usable, else LLVM
         (:func:`resolve_variant`, which also reads ``$PSEUDOLIGHT_VARIANT``).
+    blas_threads : BLAS threads during an estimate (:mod:`estimator.core.blas`): 1, because its
+        products are small and a second thread waits on the first when other work shares the
+        cores; more for a large problem on idle cores; 0 leaves the process's own setting.
     """
 
     variant: str | None = None
+    blas_threads: int = 1
 
     def check(self):
         return [(self.variant in (None, "", "auto", *VARIANTS),
-                 f"variant must be one of {', '.join(VARIANTS)} or 'auto', got {self.variant!r}")]
+                 f"variant must be one of {', '.join(VARIANTS)} or 'auto', got {self.variant!r}"),
+                (self.blas_threads >= 0, f"blas_threads must be >= 0 (0: the process's setting), "
+                                         f"got {self.blas_threads}")]
 
 
 class BackendError(InputError):

@@ -1,10 +1,11 @@
-"""The estimate runs its dense linear algebra on one BLAS thread and gives the caller's back."""
+"""The estimate runs its dense linear algebra on ``blas_threads`` BLAS threads (one by default) and
+gives the caller's back."""
 import numpy as np
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import estimator.api as api
 from estimator import estimate
-from estimator.core.blas import one_blas_thread
+from estimator.core.blas import limited_blas
 
 from .micro import micro_config, micro_scene
 
@@ -16,10 +17,10 @@ def blas_threads() -> list[int]:
 def test_one_blas_thread_inside_and_the_callers_limit_after():
     seen = []
 
-    @one_blas_thread
     def work(x):
-        seen.extend(blas_threads())
-        return x @ x.T
+        with limited_blas(1):
+            seen.extend(blas_threads())
+            return x @ x.T
 
     with threadpool_limits(limits=2, user_api="blas"):
         before = blas_threads()
@@ -64,15 +65,15 @@ def test_overlapping_limited_calls_share_one_limit_and_restore_it_once(monkeypat
     first_done, second_started = threading.Event(), threading.Event()
     depth = {}
 
-    @one_blas_thread
     def first():
-        second_started.wait(10)
+        with limited_blas(1):
+            second_started.wait(10)
 
-    @one_blas_thread
     def second():
-        second_started.set()
-        first_done.wait(10)
-        depth["second"] = blas._held["depth"]
+        with limited_blas(1):
+            second_started.set()
+            first_done.wait(10)
+            depth["second"] = blas._held["depth"]
 
     with threadpool_limits(limits=2, user_api="blas"):
         before = blas_threads()
@@ -83,3 +84,21 @@ def test_overlapping_limited_calls_share_one_limit_and_restore_it_once(monkeypat
         b.join()
         assert made == [1] and depth["second"] == 1      # the first's exit left the limit in place
         assert blas._held == {"depth": 0, "limits": None} and blas_threads() == before
+
+
+def test_blas_threads_sets_the_count_and_zero_leaves_the_process_setting(monkeypatch):
+    """``blas_threads`` = 2 gives the solve two threads; 0 leaves the caller's limit as it is."""
+    seen = []
+    solve = api._solve
+
+    def spy(*args, **kwargs):
+        seen.append(set(blas_threads()))
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(api, "_solve", spy)
+    data, _ = micro_scene()
+    with threadpool_limits(limits=3, user_api="blas"):
+        estimate(data, "retinex-segmented", micro_config(blas_threads=2))
+        estimate(data, "retinex-segmented", micro_config(blas_threads=0))
+    assert seen == [{2}, {3}]
+

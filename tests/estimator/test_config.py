@@ -13,6 +13,7 @@ from estimator.config import SECTIONS
 # a change of format, made on purpose
 WIRE_NAMES = (
     "sh_order", "diffuse_light", "defilter_order", "phong_exponent", "specular_model", "variant",
+    "blas_threads",
     "directions", "min_cos_view", "min_pixels", "pure_pixels", "min_coverage", "negative_tolerance",
     "subpixel_samples", "dense_rows", "light_faces", "iterations", "tol", "components", "lm_damping_start",
     "lm_damping_raise",
@@ -56,6 +57,7 @@ def test_every_setting_has_one_section_and_one_default():
     ({"defilter_order": 5, "sh_order": 3}, "defilter_order"),
     ({"tol": float("nan")}, "tol"),
     ({"variant": 3}, "variant"),
+    ({"blas_threads": -1}, "blas_threads"),
     ({"pure_pixels": 1}, "pure_pixels"),
     ({"subpixel_samples": 0}, "subpixel_samples"),
     ({"robust_loss": "l1"}, "robust_loss"),
