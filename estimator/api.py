@@ -98,6 +98,9 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
     rejected = prep.all_obs.rejected
     est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
+    rowless = [data.views[int(i)].name for i in (prep.all_obs.rowless_views if prep.all_obs.rowless_views is not None
+                                                   else ())]
+    est.info["rowless_views"] = rowless
     est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
                            "total": time.perf_counter() - t0}
     if offsets is not None:
@@ -117,7 +120,7 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
     flat, repeated = data.mesh.degenerate_faces()
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + _mesh_warnings(
-        flat, repeated) + [
+        flat, repeated) + _rowless_warnings(rowless) + [
         f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]] + ([
@@ -133,6 +136,16 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
         "'outline_px' in 'poses'): the refinement matched no pose to their silhouettes; check the intrinsics (focal "
         "length, principal point) and the mesh's scale against the images"] if off else [])
     return est
+
+
+def _rowless_warnings(names: list[str]) -> list[str]:
+    """The warning for views that show the mesh but give no observation (``names``, may be empty)."""
+    if not names:
+        return []
+    return [f"{len(names)} view(s) show the mesh but no face whole in any pixel, where the other views resolve the "
+            f"faces (a camera far from the object among nearer ones): they give no observation and are left out "
+            f"({', '.join(names[:5])}{' ...' if len(names) > 5 else ''}; 'rowless_views'); pure_pixels=false "
+            "observes every face through its pixel centres in every view instead"]
 
 
 def _mesh_warnings(flat: np.ndarray, repeated: np.ndarray) -> list[str]:

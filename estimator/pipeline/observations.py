@@ -81,6 +81,9 @@ class Observations:
     footprint_pixels : the mean pixel area a row of an unresolved face covers in its view
         (the share of sub-pixel rays it takes, summed over its pixels; with one sub-pixel
         sample, its pixel centres); None when no face is unresolved.
+    rowless_views : (K,) int64 views that show the mesh but give no row: no face covers one of
+        their pixels whole, and the other views resolve the faces, so none is observed through
+        its footprint (:func:`gather_observations`); None when unknown.
     """
 
     face: np.ndarray
@@ -92,6 +95,7 @@ class Observations:
     view: np.ndarray | None = None
     unresolved: np.ndarray | None = None
     footprint_pixels: float | None = None
+    rowless_views: np.ndarray | None = None
 
     @cached_property
     def face_levels(self) -> np.ndarray:
@@ -105,7 +109,7 @@ class Observations:
         """The rows where ``keep`` (N,) is true."""
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
                             self.rejected, None if self.view is None else self.view[keep], self.unresolved,
-                            self.footprint_pixels)
+                            self.footprint_pixels, self.rowless_views)
 
     def merged(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> "Observations":
         """One row per (cluster, view) pair: the ``weight``-weighted mean colour and view
@@ -234,7 +238,9 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     pixel are then observed through the pixels they cover, each pixel an equation in the
     faces its ``subpixel_samples`` x ``subpixel_samples`` rays hit (:func:`_unmixed_rows`;
     with one sample, the mean of the pixels whose centre ray hits the face). A few thin
-    faces of a coarser mesh stay unobserved rather than take a neighbour's colour. The
+    faces of a coarser mesh stay unobserved rather than take a neighbour's colour, and a
+    view that shows the mesh only through pixels larger than its faces (a camera far from the
+    object among nearer ones) gives no row: it is left out (``rowless_views``), not refused. The
     pixels' equations are held in memory: beyond ``max_pixels`` usable pixels (None: no
     bound) the faces are observed through their pixel centres instead.
     Pixels with coverage ``alpha < min_alpha``
@@ -303,22 +309,26 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         raise InputError(f"{len(dark)} view(s) show the mesh but every pixel on it has a channel below zero "
                          f"(or is black): {', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}; check their black "
                          "level and sign (the images must be linear radiance) or drop them from the dataset")
-    blind = [view.name for view, part in zip(views, parts) if len(part[0]) == 0]
-    if len(blind) == len(views) and hit.any():
+    empty = [index for index, part in enumerate(parts) if len(part[0]) == 0]
+    if len(empty) == len(views) and hit.any():
         remedy = "lower min_pixels" if min_pixels > 1 else (
             "none of their pixels yields an observation (faces far smaller than the pixels, or seen only at the "
             "silhouette); check the mesh against the images")
         raise InputError(f"no face covers min_pixels={min_pixels} pixels in any view, although pixel centres hit "
                          f"{int(hit.sum())} faces: {remedy}")
-    if len(blind) == len(views):
+    if len(empty) == len(views):
         raise InputError("no camera sees any face of the mesh: check the poses (OpenGL c2w) and the mesh")
+    blind = [views[index].name for index in empty if not usable[index].any()]
     if blind:
         raise InputError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
+    # the other empty views show the mesh, but no face whole in a pixel (a camera far from the
+    # object among nearer ones), where the other views resolve the faces: no row, left out
     _check_exposure_levels(views, np.array(levels))
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
     unresolved = footprint & (np.bincount(face, minlength=f) > 0)
     dense = pure_pixels and unresolved.any()
     return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
                         view_index.astype(np.int64), unresolved if dense else None,
-                        footprint_pixels / max(int(unresolved[face].sum()), 1) if dense else None)
+                        footprint_pixels / max(int(unresolved[face].sum()), 1) if dense else None,
+                        np.array(empty, dtype=np.int64))

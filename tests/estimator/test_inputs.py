@@ -188,6 +188,30 @@ def test_faces_smaller_than_a_pixel_are_observed_through_their_pixel_centres(siz
     assert centres.unresolved is None
 
 
+def test_a_far_view_with_no_face_whole_in_a_pixel_is_left_out_with_a_warning_not_refused():
+    """A near view resolves the faces (pure pixels); a far one shows the mesh, but no face covers
+    one of its pixels whole: it gives no row and is named in ``rowless_views`` and a warning
+    (it was refused as a camera that sees none of the mesh). A camera that sees nothing is
+    still refused."""
+    mesh = sphere(3)                                                 # 1,280 faces
+    caster = RayCaster(mesh)
+    near = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 160, 160) for eye in ([0, 0, 4], [4, 0, 1], [0, 4, 1])]
+    far = Camera.from_fov(look_at([0, 0, 16], [0, 0, 0]), 30, 24, 24)
+    assert not np.any(caster.face_id_buffers([far], pure=True)[0] >= 0)
+    assert np.any(caster.face_id_buffer(far) >= 0)
+    views = [View(f"near{i}", cam, np.full((160, 160, 3), 0.5)) for i, cam in enumerate(near)]
+    views.append(View("far", far, np.full((24, 24, 3), 0.5)))
+    obs = gather_observations(caster, views)
+    np.testing.assert_array_equal(obs.rowless_views, [3])
+    assert obs.unresolved is None and 3 not in obs.view
+    est = estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50))
+    assert est.info["rowless_views"] == ["far"]
+    assert any("left out (far;" in w for w in est.info["warnings"])
+    away = Camera.from_fov(look_at([0, 0, 4], [0, 0, 8]), 30, 24, 24)     # looks away from the mesh
+    with pytest.raises(InputError, match="1 camera.*see none of the mesh: away"):
+        gather_observations(caster, views[:3] + [View("away", away, np.full((24, 24, 3), 0.5))])
+
+
 def test_an_estimate_counts_the_faces_observed_through_pixel_centres():
     """Every face a pixel centre hits in a whole object pixel (alpha 1, as the sub-pixel rays
     measure it) and no pure pixel resolves is counted, and estimated."""
