@@ -144,8 +144,7 @@ def _rowless_warnings(names: list[str]) -> list[str]:
         return []
     return [f"{len(names)} view(s) show the mesh but no face whole in any pixel, where the other views resolve the "
             f"faces (a camera far from the object among nearer ones): they give no observation and are left out "
-            f"({', '.join(names[:5])}{' ...' if len(names) > 5 else ''}; 'rowless_views'); pure_pixels=false "
-            "observes every face through its pixel centres in every view instead"]
+            f"({', '.join(names[:5])}{' ...' if len(names) > 5 else ''}; 'rowless_views')"]
 
 
 def _mesh_warnings(flat: np.ndarray, repeated: np.ndarray) -> list[str]:
