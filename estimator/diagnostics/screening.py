@@ -16,8 +16,10 @@ Five reasons, each a property of the data or of physics, none fitted to a scene:
   it from zero.
 * ``contradicted by its observations``: the face shares one albedo with others (a region),
   it has observations, and every one of them is an outlier under the estimate: its own data
-  reject the albedo its region gave it (a face joined to a region by its neighbours, whose
-  colour is another region's).
+  reject the albedo its region gave it. A face joined to a region by its neighbours whose
+  colour is another region's is one such face; more often it is a face whose views the model
+  misfits, where the object shades itself (its shadows and interreflections are what the
+  light's order and the shadow function's directions resolve least).
 * ``left out by the method``: the face has observations in kept views, but the method gave
   it no albedo (``bilinear-clustered`` leaves out faces whose median colour over the views is
   below ``min_brightness`` times the 95th percentile of the faces' medians, as in a point
