@@ -86,13 +86,18 @@ def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
         for k in range(3):
             jac = est.diffuse[face, k, None] * c_rows + est.specular[face, k, None] * d_rows
             gram[k] = gram[k] + jac.T @ jac
-    worst = 1.0
-    for k in range(3):
-        eig = np.linalg.eigvalsh(gram[k])
-        if eig[-1] <= 0:
-            return float("inf")
-        worst = max(worst, float(np.sqrt(eig[-1] / max(eig[0], eig[-1] * 1e-300))))
-    return worst
+    return max(1.0, *(normal_condition(g) for g in gram))
+
+
+def normal_condition(gram: np.ndarray) -> float:
+    """Condition number of a least-squares system from its normal matrix ``gram`` (M, M):
+    sqrt of the ratio of its extreme eigenvalues; infinite where the smallest is within the
+    normal matrix's own rounding of the largest (M x machine epsilon of it: the system is
+    singular, and the ratio of two rounding errors would read as a finite number)."""
+    eig = np.linalg.eigvalsh(gram)
+    if eig[-1] <= 0 or eig[0] <= eig[-1] * len(eig) * np.finfo(float).eps:
+        return float("inf")
+    return float(np.sqrt(eig[-1] / eig[0]))
 
 
 def _row_views(obs) -> np.ndarray:

@@ -52,3 +52,16 @@ def test_the_sun_columns_are_traced_once_per_direction(lit_by_a_sun, monkeypatch
     diffuse_shading(prep, est)                       # kept on the shadow function
     monkeypatch.setattr(trust, "sun_shadings", lambda *a, **k: pytest.fail("traced again"))
     np.testing.assert_allclose(diffuse_shading(prep, est), shade, rtol=1e-9, atol=1e-12)
+
+
+def test_the_light_condition_is_the_singular_value_ratio_and_infinite_where_singular():
+    """sqrt of the normal matrix's eigenvalue ratio, the singular values' ratio of the system;
+    a rank-deficient system (a box's six normals cannot fix an order-2 light) is infinite, not
+    the ratio of two rounding errors (it read 1e+150)."""
+    rng = np.random.default_rng(0)
+    jac = rng.normal(size=(40, 6)) * [1, 1, 1, 1, 1, 1e-3]
+    singular = np.linalg.svd(jac, compute_uv=False)
+    assert trust.normal_condition(jac.T @ jac) == pytest.approx(singular[0] / singular[-1], rel=1e-6)
+    deficient = np.hstack([jac[:, :5], jac[:, :1] + jac[:, 1:2]])       # the last column repeats two
+    assert trust.normal_condition(deficient.T @ deficient) == np.inf
+    assert trust.normal_condition(np.zeros((3, 3))) == np.inf
