@@ -27,6 +27,7 @@ NEIGHBOUR_VIEWS = 3         # ... and OUTLIER_VIEW_FACTOR x the median gross sha
 HIGH_RESIDUAL = 0.15        # median relative residual above which the model fits poorly
 ILL_CONDITIONED = 1e7       # condition number of the light's normal equations
 MAX_UNKEPT = 0.2            # share of faces without a kept observation
+IMPRECISE_ALBEDO = 0.10     # the median face's relative albedo standard error beyond the ±10 % the reports score
 PLANE_MARGIN = 1e-3         # cosine above a face's plane beyond float32 rounding of the visibility's own test
 
 
@@ -357,6 +358,12 @@ def warnings_for(est: Estimate) -> list[str]:
                    f"{100 * GROSS_RESIDUAL:.0f} % of the exposure level where other views reflecting the same "
                    f"directions fit (typical view {100 * typical:.1f} %): glare, an occluder or a wrong pose? "
                    f"(pose refinement, pose_rounds, corrects poses){exposure}")
+    se = trust.get("albedo_relative_se")
+    if se and se["median"] > IMPRECISE_ALBEDO:
+        out.append(f"imprecise albedos: the median face's own observations fix its albedo only to ±"
+                   f"{100 * se['median']:.0f} % (one standard error, the light fixed), beyond the ±"
+                   f"{100 * IMPRECISE_ALBEDO:.0f} % the reports score: noise, few views, or colours that a glossy "
+                   "coat's reflection dominates (dark albedos under a coat)")
     median = trust["residual"]["median_relative"]
     if median is not None and median > HIGH_RESIDUAL:
         out.append(f"high residual: the estimate re-predicts its observations with a median relative error of "

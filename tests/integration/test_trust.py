@@ -110,6 +110,7 @@ def _trust(median=0.01, condition=10.0, shares=(0.0, 0.0, 0.0, 0.0)):
     (_trust(shares=(0.0, 0.3, 0.0, 0.0)), {}, "its exposure is 1.30x the views' (view_gains"),
     (_trust(), {"faces_without_kept_views": 0.5}, "50 % of the faces have no observation"),
     (_trust(), {"degrees_of_freedom": {"observations": 10, "unknowns": 12}}, "underdetermined"),
+    ({**_trust(), "albedo_relative_se": {"median": 0.28, "p90": 0.7, "max": 3.0}}, {}, "albedo only to ±28 %"),
 ])
 def test_each_warning_fires_on_its_condition(trust, info, needle):
     from estimator.diagnostics.trust import warnings_for
@@ -117,6 +118,8 @@ def test_each_warning_fires_on_its_condition(trust, info, needle):
     lines = warnings_for(_with_trust(trust, **info))
     assert len(lines) == 1 and needle in lines[0]
     assert warnings_for(_with_trust(_trust())) == []
+    precise = {**_trust(), "albedo_relative_se": {"median": 0.09, "p90": 0.7, "max": 3.0}}
+    assert warnings_for(_with_trust(precise)) == []
 
 
 def test_gross_errors_a_reflection_explains_raise_no_outlier_view():
