@@ -98,9 +98,7 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     est.info["faces_without_kept_views"] = float(1.0 - prep.obs.observed_faces().mean())
     rejected = prep.all_obs.rejected
     est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
-    rowless = [data.views[int(i)].name for i in (prep.all_obs.rowless_views if prep.all_obs.rowless_views is not None
-                                                   else ())]
-    est.info["rowless_views"] = rowless
+    est.info["rowless_views"] = rowless = [data.views[int(i)].name for i in prep.all_obs.rowless_views]
     est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
                            "total": time.perf_counter() - t0}
     if offsets is not None:
@@ -120,7 +118,7 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
     flat, repeated = data.mesh.degenerate_faces()
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + _mesh_warnings(
-        flat, repeated) + _rowless_warnings(rowless) + [
+        flat, repeated) + _rowless_warnings(rowless, config.min_pixels) + [
         f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]] + ([
@@ -138,12 +136,15 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     return est
 
 
-def _rowless_warnings(names: list[str]) -> list[str]:
-    """The warning for views that show the mesh but give no observation (``names``, may be empty)."""
+def _rowless_warnings(names: list[str], min_pixels: int) -> list[str]:
+    """The warning for views that show the mesh but give no observation (``names``, may be
+    empty), with the ``min_pixels`` of the run."""
     if not names:
         return []
-    return [f"{len(names)} view(s) show the mesh but no face whole in any pixel, where the other views resolve the "
-            f"faces (a camera far from the object among nearer ones): they give no observation and are left out "
+    cover = "a pixel of theirs whole" if min_pixels == 1 else f"min_pixels={min_pixels} of their pixels whole"
+    cause = "" if min_pixels == 1 else ", or min_pixels too high for their resolution"
+    return [f"{len(names)} view(s) show the mesh but give no observation: no face covers {cover} (a camera far "
+            f"from the object among nearer ones{cause}); faces that only they show stay unestimated "
             f"({', '.join(names[:5])}{' ...' if len(names) > 5 else ''}; 'rowless_views')"]
 
 

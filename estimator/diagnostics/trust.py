@@ -93,10 +93,11 @@ def light_condition(prep: Prepared, est: Estimate, rows: np.ndarray) -> float:
 def normal_condition(gram: np.ndarray) -> float:
     """Condition number of a least-squares system from its normal matrix ``gram`` (M, M):
     sqrt of the ratio of its extreme eigenvalues; infinite where the smallest is within the
-    normal matrix's own rounding of the largest (M x machine epsilon of it: the system is
-    singular, and the ratio of two rounding errors would read as a finite number)."""
+    eigensolver's rounding of the largest (machine epsilon of it, a condition number of about
+    7e7, above :data:`ILL_CONDITIONED`): there the system is singular as far as its normal
+    matrix can tell, and the ratio of two rounding errors would read as a finite number."""
     eig = np.linalg.eigvalsh(gram)
-    if eig[-1] <= 0 or eig[0] <= eig[-1] * len(eig) * np.finfo(float).eps:
+    if eig[-1] <= 0 or eig[0] <= eig[-1] * np.finfo(float).eps:
         return float("inf")
     return float(np.sqrt(eig[-1] / eig[0]))
 

@@ -1,7 +1,7 @@
 """Per-face colour observations from calibrated views (the estimator's input rows)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -81,9 +81,10 @@ class Observations:
     footprint_pixels : the mean pixel area a row of an unresolved face covers in its view
         (the share of sub-pixel rays it takes, summed over its pixels; with one sub-pixel
         sample, its pixel centres); None when no face is unresolved.
-    rowless_views : (K,) int64 views that show the mesh but give no row: no face covers one of
-        their pixels whole, and the other views resolve the faces, so none is observed through
-        its footprint (:func:`gather_observations`); None when unknown.
+    rowless_views : (K,) int64 views that show the mesh but give no row: no face covers
+        ``min_pixels`` of their pixels whole, and the images resolve the faces elsewhere, so no
+        face is observed through its footprint (:func:`gather_observations`; empty for
+        observations made otherwise, e.g. merged into clusters).
     """
 
     face: np.ndarray
@@ -95,7 +96,7 @@ class Observations:
     view: np.ndarray | None = None
     unresolved: np.ndarray | None = None
     footprint_pixels: float | None = None
-    rowless_views: np.ndarray | None = None
+    rowless_views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @cached_property
     def face_levels(self) -> np.ndarray:
@@ -239,8 +240,8 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     faces its ``subpixel_samples`` x ``subpixel_samples`` rays hit (:func:`_unmixed_rows`;
     with one sample, the mean of the pixels whose centre ray hits the face). A few thin
     faces of a coarser mesh stay unobserved rather than take a neighbour's colour, and a
-    view that shows the mesh only through pixels larger than its faces (a camera far from the
-    object among nearer ones) gives no row: it is left out (``rowless_views``), not refused. The
+    view in which no face covers ``min_pixels`` pixels whole (a camera far from the object
+    among nearer ones) gives no row: it is named (``rowless_views``), not refused. The
     pixels' equations are held in memory: beyond ``max_pixels`` usable pixels (None: no
     bound) the faces are observed through their pixel centres instead.
     Pixels with coverage ``alpha < min_alpha``

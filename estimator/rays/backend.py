@@ -42,6 +42,7 @@ class BackendConfig(Section):
     blas_threads : BLAS threads during an estimate (:mod:`estimator.core.blas`): 1, because its
         products are small and a second thread waits on the first when other work shares the
         cores; more for a large problem on idle cores; 0 leaves the process's own setting.
+        Estimates running at once in one process (threads) share the first one's count.
     """
 
     variant: str | None = None

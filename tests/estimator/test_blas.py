@@ -101,4 +101,3 @@ def test_blas_threads_sets_the_count_and_zero_leaves_the_process_setting(monkeyp
         estimate(data, "retinex-segmented", micro_config(blas_threads=2))
         estimate(data, "retinex-segmented", micro_config(blas_threads=0))
     assert seen == [{2}, {3}]
-

@@ -191,8 +191,9 @@ def test_faces_smaller_than_a_pixel_are_observed_through_their_pixel_centres(siz
 def test_a_far_view_with_no_face_whole_in_a_pixel_is_left_out_with_a_warning_not_refused():
     """A near view resolves the faces (pure pixels); a far one shows the mesh, but no face covers
     one of its pixels whole: it gives no row and is named in ``rowless_views`` and a warning
-    (it was refused as a camera that sees none of the mesh). A camera that sees nothing is
-    still refused."""
+    (it was refused as a camera that sees none of the mesh); so is one whose faces each cover
+    fewer than ``min_pixels`` of its pixels, with that setting named. A camera that sees
+    nothing is still refused."""
     mesh = sphere(3)                                                 # 1,280 faces
     caster = RayCaster(mesh)
     near = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 160, 160) for eye in ([0, 0, 4], [4, 0, 1], [0, 4, 1])]
@@ -206,7 +207,13 @@ def test_a_far_view_with_no_face_whole_in_a_pixel_is_left_out_with_a_warning_not
     assert obs.unresolved is None and 3 not in obs.view
     est = estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50))
     assert est.info["rowless_views"] == ["far"]
-    assert any("left out (far;" in w for w in est.info["warnings"])
+    assert any("no face covers a pixel of theirs whole" in w and "(far;" in w for w in est.info["warnings"])
+    mid = Camera.from_fov(look_at([0, 0, 6], [0, 0, 0]), 30, 64, 64)
+    assert np.any(caster.face_id_buffers([mid], pure=True)[0] >= 0)
+    est = estimate(MultiViewData(mesh, views[:3] + [View("mid", mid, np.full((64, 64, 3), 0.5))]),
+                   "median-color", EstimatorConfig(sh_order=2, directions=50, min_pixels=9))
+    assert est.info["rowless_views"] == ["mid"]     # faces whole in its pixels, but in fewer than 9 each
+    assert any("min_pixels=9 of their pixels whole" in w and "min_pixels too high" in w for w in est.info["warnings"])
     away = Camera.from_fov(look_at([0, 0, 4], [0, 0, 8]), 30, 24, 24)     # looks away from the mesh
     with pytest.raises(InputError, match="1 camera.*see none of the mesh: away"):
         gather_observations(caster, views[:3] + [View("away", away, np.full((24, 24, 3), 0.5))])

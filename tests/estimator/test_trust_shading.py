@@ -65,3 +65,8 @@ def test_the_light_condition_is_the_singular_value_ratio_and_infinite_where_sing
     deficient = np.hstack([jac[:, :5], jac[:, :1] + jac[:, 1:2]])       # the last column repeats two
     assert trust.normal_condition(deficient.T @ deficient) == np.inf
     assert trust.normal_condition(np.zeros((3, 3))) == np.inf
+    # an order-10 light's 121 columns at condition 8e6: finite, so the warning's 1e7 bound can fire
+    q, _ = np.linalg.qr(rng.normal(size=(400, 121)))
+    wide = q * np.geomspace(1.0, 1 / 8e6, 121)
+    assert trust.normal_condition(wide.T @ wide) == pytest.approx(8e6, rel=0.01)
+    assert 8e6 < trust.ILL_CONDITIONED < 1 / np.sqrt(np.finfo(float).eps)
