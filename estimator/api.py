@@ -88,8 +88,10 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
                                            caster, last[0] if last else None)
     t = time.perf_counter()
     est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
-    if gains is not None:
-        est.info["view_gains"] = {v.name: g.tolist() for v, g in zip(data.views, gains)}
+    if gains is not None:   # null for a view that gives no observation: nothing estimated its gain
+        silent = set(prep.all_obs.rowless_views.tolist())
+        est.info["view_gains"] = {v.name: None if i in silent else g.tolist()
+                                  for i, (v, g) in enumerate(zip(data.views, gains))}
     est.info["observations"] = int(len(prep.obs.face))
     est.info["observations_all"] = int(len(prep.all_obs.face))
     unresolved = prep.all_obs.unresolved

@@ -205,8 +205,10 @@ def test_a_far_view_with_no_face_whole_in_a_pixel_is_left_out_with_a_warning_not
     obs = gather_observations(caster, views)
     np.testing.assert_array_equal(obs.rowless_views, [3])
     assert obs.unresolved is None and 3 not in obs.view
-    est = estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50))
+    est = estimate(MultiViewData(mesh, views), "median-color", EstimatorConfig(sh_order=2, directions=50,
+                                                                               view_gains=True))
     assert est.info["rowless_views"] == ["far"]
+    assert est.info["view_gains"]["far"] is None and len(est.info["view_gains"]["near0"]) == 3
     assert any("no face covers a pixel of theirs whole" in w and "(far;" in w for w in est.info["warnings"])
     mid = Camera.from_fov(look_at([0, 0, 6], [0, 0, 0]), 30, 64, 64)
     assert np.any(caster.face_id_buffers([mid], pure=True)[0] >= 0)
