@@ -323,8 +323,8 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     if blind:
         raise InputError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
-    # the other empty views show the mesh, but no face whole in a pixel (a camera far from the
-    # object among nearer ones), where the other views resolve the faces: no row, left out
+    # the other empty views show the mesh, but no face covers min_pixels of their pixels whole (a
+    # camera far from the object among nearer ones): named in rowless_views, not refused
     _check_exposure_levels(views, np.array(levels))
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
     unresolved = footprint & (np.bincount(face, minlength=f) > 0)

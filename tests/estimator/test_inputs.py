@@ -188,7 +188,7 @@ def test_faces_smaller_than_a_pixel_are_observed_through_their_pixel_centres(siz
     assert centres.unresolved is None
 
 
-def test_a_far_view_with_no_face_whole_in_a_pixel_is_left_out_with_a_warning_not_refused():
+def test_a_far_view_with_no_face_whole_in_a_pixel_gives_no_row_and_is_named_not_refused():
     """A near view resolves the faces (pure pixels); a far one shows the mesh, but no face covers
     one of its pixels whole: it gives no row and is named in ``rowless_views`` and a warning
     (it was refused as a camera that sees none of the mesh); so is one whose faces each cover
