@@ -135,3 +135,27 @@ def test_gross_errors_a_reflection_explains_raise_no_outlier_view():
     assert [line[:15] for line in warnings_for(_with_trust(trust))] == ["outlier view v1"]
     trust["views"][1]["neighbour_gross_share"] = 0.05   # 5x that is 0.25 > 0.2: its neighbours err too
     assert warnings_for(_with_trust(trust)) == []
+
+
+def test_a_view_exposed_apart_from_its_neighbours_is_named_unless_the_views_spread_as_far():
+    """A view half as bright as its neighbouring views, where the other views' exposures agree
+    with their neighbours' within a few per cent, is named with view_gains as the remedy; the
+    same view among views whose reflections spread their exposures as far (a glossy object),
+    or a run that divided the gains out, stays silent; so does one within the ±10 % band."""
+    from estimator.diagnostics.trust import warnings_for
+
+    def views(ratios):
+        trust = _trust(shares=(0.0,) * len(ratios))
+        for v, r in zip(trust["views"], ratios):
+            v["exposure"], v["neighbour_exposure"] = r, 1.0
+        return trust
+
+    steady = [1.0, 1.02, 0.98, 1.01, 0.99, 1.03, 0.97, 1.0]
+    lines = warnings_for(_with_trust(views(steady[:3] + [0.49] + steady[4:])))
+    assert len(lines) == 1 and lines[0].startswith("view v3 is exposed 0.49x its neighbouring views")
+    assert "view_gains=true" in lines[0]
+    assert warnings_for(_with_trust(views(steady))) == []
+    assert warnings_for(_with_trust(views(steady[:3] + [0.92] + steady[4:]))) == []      # within ±10 %
+    glossy = [1.0, 1.5, 0.6, 1.3, 0.7, 1.6, 0.55, 1.2]
+    assert warnings_for(_with_trust(views(glossy[:3] + [0.49] + glossy[4:]))) == []
+    assert warnings_for(_with_trust(views(steady[:3] + [0.49] + steady[4:]), view_gains={"v0": [1, 1, 1]})) == []
