@@ -130,11 +130,16 @@ class BilinearSegmented(BilinearClustered):
         if (~grouped & seen).any() and regions:
             specular[~grouped] = np.median(result.specular[:regions], axis=0)
         labels_out = np.where(observed, face_group, -1).astype(np.int64)
+        # a diffuse and a specular albedo per region, a diffuse one per free face (their specular
+        # the regions' median), the light less its DC gauge
+        per_region = 2 if c.components == "both" else 1
+        unknowns = per_region * regions + int((observed & ~grouped).sum()) + result.light.shape[0] - 1
         info = {"clusters": int(len(np.unique(face_group[observed]))), "uniform_regions": regions,
                 "uniform_share": float(np.mean(grouped[observed])) if observed.any() else 0.0,
                 "angular_clusters": history[0], "regions_per_round": history,
                 "clustering_s": time.perf_counter() - t,
-                "residuals": result.residuals, "lm_residuals": result.lm_residuals}
+                "residuals": result.residuals, "lm_residuals": result.lm_residuals,
+                "degrees_of_freedom": {"observations": int(3 * len(prep.obs.face)), "unknowns": int(3 * unknowns)}}
         return Estimate(np.where(observed[:, None], diffuse, 0.0), np.where(observed[:, None], specular, 0.0),
                         self.model.pseudo_from_light(result.light), labels_out, observed, self.name, c, info,
                         result.light if self.model.light == "radiance" else None)

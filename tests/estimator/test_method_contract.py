@@ -44,6 +44,8 @@ def test_every_method_keeps_the_contract(scene, method):
     if REGISTRY[method].reports_residual:
         residuals = est.info["residuals"]
         assert len(residuals) >= 1 and all(np.isfinite(r) and r >= 0 for r in residuals)
+        dof = est.info["degrees_of_freedom"]    # the trust line prints them
+        assert 0 < dof["unknowns"] and 0 < dof["observations"] == 3 * est.info["observations"]
 
 
 @pytest.mark.parametrize("method", sorted(REGISTRY))
