@@ -89,7 +89,7 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     t = time.perf_counter()
     est.info["trust"], stats = trust.diagnose(prep, est, [v.name for v in data.views])
     if gains is not None:   # null for a view that gives no observation: nothing estimated its gain
-        silent = set(prep.all_obs.rowless_views.tolist())
+        silent = set(prep.all_obs.rowless_views.tolist()) | set(prep.all_obs.black_views.tolist())
         est.info["view_gains"] = {v.name: None if i in silent else g.tolist()
                                   for i, (v, g) in enumerate(zip(data.views, gains))}
     est.info["observations"] = int(len(prep.obs.face))
@@ -101,6 +101,8 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     rejected = prep.all_obs.rejected
     est.info["rejected_pixels"] = {v.name: int(n) for v, n in zip(data.views, rejected) if n > 0}
     est.info["rowless_views"] = rowless = [data.views[int(i)].name for i in prep.all_obs.rowless_views]
+    est.info["black_views"] = black = [data.views[int(i)].name for i in prep.all_obs.black_views]
+    est.info["winding_conflicts"] = conflicts = int(data.mesh.winding_conflicts().sum())
     est.info["timings"] = {**prep.timings, "solve": solve_seconds, "trust": time.perf_counter() - t,
                            "total": time.perf_counter() - t0}
     if offsets is not None:
@@ -120,7 +122,8 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
     flat, repeated = data.mesh.degenerate_faces()
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + _mesh_warnings(
-        flat, repeated) + _rowless_warnings(rowless, config.min_pixels) + [
+        flat, repeated) + _rowless_warnings(rowless, config.min_pixels) + _black_warnings(black) + (
+        _winding_warnings(conflicts) if conflicts else []) + [
         f"pose refinement of {p['name']} diverged (beyond {pose.POSE_MAX_DEGREES:g} deg or "
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]] + ([
@@ -150,14 +153,31 @@ def _rowless_warnings(names: list[str], min_pixels: int) -> list[str]:
             f"({', '.join(names[:5])}{' ...' if len(names) > 5 else ''}; 'rowless_views')"]
 
 
+def _black_warnings(names: list[str]) -> list[str]:
+    """The warning for views that show the mesh black (``names``, may be empty)."""
+    if not names:
+        return []
+    return [f"{len(names)} view(s) show the mesh black, no pixel on it above zero (a failed capture, or only the "
+            f"object's unlit side): they give no observation ({', '.join(names[:5])}"
+            f"{' ...' if len(names) > 5 else ''}; 'black_views')"]
+
+
+def _winding_warnings(conflicts: int) -> list[str]:
+    """The warning for ``conflicts`` (> 0) edges whose two faces are wound in opposite directions."""
+    return [f"{conflicts} edge(s) of the mesh join faces wound in opposite directions: a face whose normal points "
+            "into the object is seen from behind and never estimated; make the winding consistent (e.g. "
+            "trimesh.repair.fix_winding; 'winding_conflicts')"]
+
+
 def _mesh_warnings(flat: np.ndarray, repeated: np.ndarray) -> list[str]:
-    """Warnings for the mesh's faces of zero area and repeated faces ((F,) bool each)."""
+    """Warnings for the mesh's faces without a normal and repeated faces ((F,) bool each)."""
     out = []
     if flat.any():
-        out.append(f"{int(flat.sum())} face(s) of the mesh have zero area (first: {int(np.argmax(flat))}): they "
-                   "have no normal, are never observed and stay unestimated")
+        out.append(f"{int(flat.sum())} face(s) of the mesh have zero area or corners in a line, to the rounding of "
+                   f"their coordinates (first: {int(np.argmax(flat))}): they have no normal, are never observed and "
+                   "stay unestimated")
     if repeated.any():
-        out.append(f"{int(repeated.sum())} face(s) of the mesh repeat the vertices of an earlier face (first: "
+        out.append(f"{int(repeated.sum())} face(s) of the mesh repeat the corners of an earlier face (first: "
                    f"{int(np.argmax(repeated))}): the rays hit one of each pair, so the other stays unestimated")
     return out
 
@@ -180,6 +200,12 @@ def _fit(data: MultiViewData, cls, config: EstimatorConfig, known_sh, known_radi
     if not np.any(prep.obs.rgb > 0):
         raise InputError("every observed pixel is black or negative: there is no light to estimate from "
                          "(check the images' exposure and sign)")
+    dark = [name for name, lit in zip(("red", "green", "blue"), np.any(prep.obs.rgb > 0, axis=0)) if not lit]
+    if dark:
+        named = " and ".join(dark)
+        raise InputError(f"the {named} channel is zero or negative in every observed pixel: the light (or the "
+                         f"camera) records no {named}, so no {named} albedo can be estimated; check the images' "
+                         "white balance and channel order")
     t = time.perf_counter()
     try:
         est = _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates, prior)

@@ -14,6 +14,13 @@ import numpy as np
 from .camera import Camera
 from .errors import InputError
 
+# a face is flat (it has no normal) when its doubled area, |e1 x e2|, is within the rounding of
+# its vertex coordinates: mesh files commonly store them as float32, spaced |v| 2^-23 apart at a
+# coordinate of size |v|, so the cross product of edges of length L carries an error of about
+# |v| L 2^-23; four such spacings. A collinear face written in float32 has an area of that order
+# and a normal that is rounding noise.
+FLAT_TOLERANCE = 4 * 2.0 ** -23
+
 
 @dataclass(frozen=True)
 class TriangleMesh:
@@ -71,15 +78,44 @@ class TriangleMesh:
         c = self.corners
         n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
         length = np.linalg.norm(n, axis=1, keepdims=True)
-        normals = n / np.where(length > 0, length, 1.0)
+        normals = np.where(self.flat[:, None], 0.0, n / np.where(length > 0, length, 1.0))
         normals.setflags(write=False)
         return normals
 
     @cached_property
+    def flat(self) -> np.ndarray:
+        """(F,) bool faces without a normal: a doubled area within :data:`FLAT_TOLERANCE` of the
+        rounding of their coordinates (zero area, or collinear corners written in float32);
+        computed once per mesh and read-only."""
+        c = self.corners
+        doubled = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+        edge = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
+        flat = doubled <= FLAT_TOLERANCE * np.abs(c).max(axis=(1, 2)) * edge
+        flat.setflags(write=False)
+        return flat
+
+    @cached_property
+    def welded_faces(self) -> np.ndarray:
+        """(F, 3) int64 each face's vertex indices with the vertices at one position made one: an
+        unwelded mesh (every face its own three vertices, as STL and many exports write it)
+        shares no index between neighbouring faces but shares their positions. Computed once
+        per mesh and read-only."""
+        v = self.vertices
+        order = np.lexsort(v.T[::-1])   # positions sorted; a row-wise np.unique is 3x slower
+        ordered = v[order]
+        first = np.concatenate([[True], np.any(ordered[1:] != ordered[:-1], axis=1)])
+        position = np.empty(len(v), dtype=np.int64)
+        position[order] = np.cumsum(first) - 1
+        welded = position[self.faces]
+        welded.setflags(write=False)
+        return welded
+
+    @cached_property
     def face_adjacency(self) -> np.ndarray:
-        """(E, 2) int64 pairs of faces that share an edge (each pair once, lower index first);
-        computed once per mesh (about 2 s at 1.3 M faces) and read-only."""
-        f = self.faces
+        """(E, 2) int64 pairs of faces that share an edge, two corners at the same positions
+        (:attr:`welded_faces`), each pair once, lower index first; computed once per mesh
+        (about 2 s at 1.3 M faces) and read-only."""
+        f = self.welded_faces
         edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
         owner = np.tile(np.arange(len(f)), 3)
         order = np.lexsort((edges[:, 1], edges[:, 0]))
@@ -90,6 +126,30 @@ class TriangleMesh:
         pairs = np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
         pairs.setflags(write=False)
         return pairs
+
+    def winding_conflicts(self) -> np.ndarray:
+        """(E,) bool over :attr:`face_adjacency`: the two faces run their shared edge in the same
+        direction, so one of them is wound the other way (consistent neighbours run it in
+        opposite directions). Pairs that share more than one edge, or an edge shared by more
+        than two faces (non-manifold), are judged on the first such edge found."""
+        f = self.welded_faces
+        start = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+        end = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+        owner = np.tile(np.arange(len(f)), 3)
+        low, high = np.minimum(start, end), np.maximum(start, end)
+        order = np.lexsort((owner, high, low))
+        low, high, owner, forward = low[order], high[order], owner[order], (start < end)[order]
+        same = (low[1:] == low[:-1]) & (high[1:] == high[:-1]) & (owner[1:] != owner[:-1])
+        pairs = np.sort(np.stack([owner[:-1][same], owner[1:][same]], axis=1), axis=1)
+        conflict = forward[:-1][same] == forward[1:][same]
+        adjacency = self.face_adjacency
+        if not len(adjacency):
+            return np.zeros(0, dtype=bool)
+        # each adjacent pair's verdict, looked up by its key (pairs listed once, lower index first)
+        keys = pairs[:, 0] * len(f) + pairs[:, 1]
+        unique, first = np.unique(keys, return_index=True)
+        where = np.searchsorted(unique, adjacency[:, 0] * len(f) + adjacency[:, 1])
+        return conflict[first[where]]
 
     @property
     def bounds_centre(self) -> np.ndarray:
@@ -103,11 +163,11 @@ class TriangleMesh:
         return 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
 
     def degenerate_faces(self) -> tuple[np.ndarray, np.ndarray]:
-        """((F,) bool, (F,) bool): faces of zero area (no normal: never observed), and faces
-        whose three vertices an earlier face already uses (a repeat, which the rays hit in its
-        place)."""
-        flat = self.areas == 0
-        ordered = np.sort(self.faces, axis=1).astype(np.int64)
+        """((F,) bool, (F,) bool): faces without a normal (:attr:`flat`: never observed), and
+        faces whose three corners an earlier face already has (a repeat, which the rays hit in
+        its place; through the same vertices or copies of them, :attr:`welded_faces`)."""
+        flat = self.flat
+        ordered = np.sort(self.welded_faces, axis=1)
         n = len(self.vertices)
         # one int64 key per face where it fits (a row-wise unique sorts 10x slower)
         keys = (ordered[:, 0] * n + ordered[:, 1]) * n + ordered[:, 2] if n < 2_000_000 else ordered

@@ -85,6 +85,11 @@ class Observations:
         ``min_pixels`` of their pixels whole, and the images resolve the faces elsewhere, so no
         face is observed through its footprint (:func:`gather_observations`; empty for
         observations made otherwise, e.g. merged into clusters).
+    black_views : (K,) int64 views that show the mesh black (no pixel on it above zero): a
+        diffuse face's colour is the same from every view, so zeros where other views see it
+        lit are a failed capture, not light, and the view gives no row; a face unlit from
+        every view has no light to estimate from either way (:func:`gather_observations`;
+        empty for observations made otherwise).
     """
 
     face: np.ndarray
@@ -97,6 +102,7 @@ class Observations:
     unresolved: np.ndarray | None = None
     footprint_pixels: float | None = None
     rowless_views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    black_views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @cached_property
     def face_levels(self) -> np.ndarray:
@@ -110,7 +116,7 @@ class Observations:
         """The rows where ``keep`` (N,) is true."""
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
                             self.rejected, None if self.view is None else self.view[keep], self.unresolved,
-                            self.footprint_pixels, self.rowless_views)
+                            self.footprint_pixels, self.rowless_views, self.black_views)
 
     def merged(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> "Observations":
         """One row per (cluster, view) pair: the ``weight``-weighted mean colour and view
@@ -256,7 +262,7 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     cameras = [v.camera for v in views]
     pure_ids = caster.face_id_buffers(cameras, pure=True) if pure_pixels else [None] * len(views)
     centre_ids = caster.face_id_buffers(cameras)   # the caster's kept buffers: traced once
-    usable, rejected, levels, on_mesh = [], [], [], []
+    usable, rejected, levels, on_mesh, black = [], [], [], [], []
     for view, ids in zip(views, centre_ids):
         valid = ids.ravel() >= 0
         if view.alpha is not None:
@@ -269,7 +275,12 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         floor = np.minimum(np.minimum(rgb[:, 0], rgb[:, 1]), rgb[:, 2])
         negative = valid & (floor < -negative_tolerance * max(level, 1e-30))
         rejected.append(int(negative.sum()))
-        usable.append(valid & ~negative)
+        # a view black on the mesh, no pixel above zero (a failed capture): a diffuse face's colour
+        # is the same from every view, so its zeros are no observation of a face lit elsewhere
+        # (mostly below zero, it is a sign error, refused below)
+        kept = valid & ~negative
+        black.append(bool(kept.any()) and rejected[-1] <= kept.sum() and not np.any(peak[kept] > 0))
+        usable.append(kept & (not black[-1]))
         on_mesh.append(bool(valid.any()))
     # the pure pixels' rows; where they resolve under half of the faces a pixel centre hits
     # (faces smaller than a pixel: a dense scan), the other faces' rows through their centres
@@ -304,14 +315,15 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         parts.append((faces, means, to_cam, np.full(len(faces), index)))
     # a view whose pixels on the mesh are mostly below zero, the rest exactly zero, is as dark
-    dark = [view.name for view, valid, seen, n in zip(views, usable, on_mesh, rejected)
-            if seen and (not valid.any() or (n > valid.sum() and not np.any(view.rgb.reshape(-1, 3)[valid] > 0)))]
+    dark = [view.name for view, valid, seen, n, blank in zip(views, usable, on_mesh, rejected, black) if seen
+            and not blank and (not valid.any() or (n > valid.sum() and not np.any(view.rgb.reshape(-1, 3)[valid] > 0)))]
     if dark:
         raise InputError(f"{len(dark)} view(s) show the mesh but every pixel on it has a channel below zero "
                          f"(or is black): {', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}; check their black "
                          "level and sign (the images must be linear radiance) or drop them from the dataset")
-    empty = [index for index, part in enumerate(parts) if len(part[0]) == 0]
-    if len(empty) == len(views) and hit.any():
+    black = np.nonzero(black)[0]
+    empty = [index for index, part in enumerate(parts) if len(part[0]) == 0 and index not in black]
+    if len(empty) + len(black) == len(views) and hit.any() and len(black) < sum(on_mesh):
         remedy = "lower min_pixels" if min_pixels > 1 else (
             "none of their pixels yields an observation (faces far smaller than the pixels, or seen only at the "
             "silhouette); check the mesh against the images")
@@ -325,6 +337,9 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
                          f"{' ...' if len(blind) > 5 else ''}; check their poses or drop them from the dataset")
     # the other empty views show the mesh, but no face covers min_pixels of their pixels whole (a
     # camera far from the object among nearer ones): named in rowless_views, not refused
+    if len(black) + len(empty) == len(views):
+        raise InputError("every view shows the mesh black (no pixel on it above zero): the images hold no light; "
+                         "check their exposure and black level")
     _check_exposure_levels(views, np.array(levels))
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
     unresolved = footprint & (np.bincount(face, minlength=f) > 0)
@@ -332,4 +347,4 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
                         view_index.astype(np.int64), unresolved if dense else None,
                         footprint_pixels / max(int(unresolved[face].sum()), 1) if dense else None,
-                        np.array(empty, dtype=np.int64))
+                        np.array(empty, dtype=np.int64), black.astype(np.int64))

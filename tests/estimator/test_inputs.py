@@ -108,11 +108,41 @@ def test_faces_of_zero_area_and_repeated_faces_are_named_in_warnings():
     assert np.flatnonzero(repeated).tolist() == [len(mesh.faces), len(mesh.faces) + 1]
     est = estimate(MultiViewData(odd, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
                    EstimatorConfig(sh_order=2, directions=50))
-    assert any(f"1 face(s) of the mesh have zero area (first: {len(faces) - 1})" in w for w in est.info["warnings"])
+    assert any(f"1 face(s) of the mesh have zero area or corners in a line, to the rounding of their coordinates "
+               f"(first: {len(faces) - 1})" in w for w in est.info["warnings"])
     assert any("2 face(s) of the mesh repeat" in w for w in est.info["warnings"])
     clean = estimate(MultiViewData(mesh, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
                      EstimatorConfig(sh_order=2, directions=50))
     assert not any("of the mesh" in w for w in clean.info["warnings"])
+
+
+def test_faces_with_corners_in_a_line_to_float32_rounding_have_no_normal():
+    """Three corners in a line, written in float32, leave an area of the coordinates' rounding
+    and a normal of noise: the face is flat (never observed), as a face of zero area is; a thin
+    but real sliver (height 1e-4 of its length) keeps its normal."""
+    base = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    line = np.array([[10.0, 10.0, 10.0], [10.3, 10.7, 10.1], [10.9, 12.1, 10.3]], np.float32).astype(float)
+    sliver = np.array([[0, 0, 2], [1, 0, 2], [0.5, 1e-4, 2]], float)
+    mesh = TriangleMesh(np.vstack([base, line, sliver]), np.arange(9).reshape(3, 3))
+    assert np.linalg.norm(np.cross(line[1] - line[0], line[2] - line[0])) > 0   # not exactly zero
+    assert mesh.flat.tolist() == [False, True, False]
+    assert mesh.face_normals[1].tolist() == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(mesh.face_normals[2], [0, 0, 1])
+    assert mesh.degenerate_faces()[0].tolist() == [False, True, False]
+
+
+def test_an_unwelded_mesh_has_the_welded_one_s_neighbours_and_repeats():
+    """Every face with its own three vertices (STL, many exports): faces are neighbours where
+    their corners share positions, so the adjacency (and everything the edge fit and the
+    segmentation build on it) equals the welded mesh's; a face repeated through copies of an
+    earlier face's vertices is a repeat."""
+    mesh = sphere(1)
+    unwelded = TriangleMesh(mesh.vertices[mesh.faces].reshape(-1, 3), np.arange(3 * mesh.num_faces).reshape(-1, 3))
+    assert len(unwelded.vertices) == 3 * mesh.num_faces
+    np.testing.assert_array_equal(unwelded.face_adjacency, mesh.face_adjacency)
+    copied = TriangleMesh(np.vstack([unwelded.vertices, mesh.vertices[mesh.faces[5]]]),
+                          np.vstack([unwelded.faces, len(unwelded.vertices) + np.arange(3)]))
+    assert np.flatnonzero(copied.degenerate_faces()[1]).tolist() == [mesh.num_faces]
 
 
 def test_a_mesh_wound_inwards_is_named():
@@ -372,3 +402,56 @@ def test_a_caster_of_another_mesh_is_refused():
     data = MultiViewData(sphere(1), [View("v", CAM, np.ones((12, 16, 3)))])
     with pytest.raises(ValueError, match="caster was built for another mesh"):
         estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50), caster=RayCaster(sphere(2)))
+
+
+def test_a_view_that_shows_the_mesh_black_gives_no_row_and_is_named():
+    """A view whose every pixel on the mesh is zero (a failed capture) gives no row, so its zeros
+    do not pull the faces' colours down, and is named in ``black_views`` and a warning; the
+    other views' rows are those they give alone. Every view black is refused."""
+    mesh = sphere(3)
+    caster = RayCaster(mesh)
+    cams = [Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 48, 48) for eye in ([0, 0, 4], [4, 0, 1], [0, 4, 1])]
+    lit = [View(f"v{i}", cam, np.full((48, 48, 3), 0.5)) for i, cam in enumerate(cams)]
+    black = View("black", Camera.from_fov(look_at([0, 0, -4], [0, 0, 0]), 30, 48, 48), np.zeros((48, 48, 3)))
+    obs = gather_observations(caster, lit + [black])
+    alone = gather_observations(caster, lit)
+    np.testing.assert_array_equal(obs.black_views, [3])
+    assert 3 not in obs.view and len(obs.rowless_views) == 0
+    np.testing.assert_array_equal(obs.face, alone.face)
+    est = estimate(MultiViewData(mesh, lit + [black]), "median-color", EstimatorConfig(sh_order=2, directions=50))
+    assert est.info["black_views"] == ["black"]
+    assert any("1 view(s) show the mesh black" in w and "(black;" in w for w in est.info["warnings"])
+    with pytest.raises(InputError, match="every view shows the mesh black"):
+        gather_observations(caster, [black, View("black2", cams[0], np.zeros((48, 48, 3)))])
+
+
+def test_a_channel_no_pixel_records_is_named():
+    """A light (or camera) without green: the error names the channel instead of blaming the
+    faces' radiance."""
+    image = np.full((12, 16, 3), 0.5)
+    image[..., 1] = 0.0
+    with pytest.raises(InputError, match="the green channel is zero or negative in every observed pixel"):
+        estimate(MultiViewData(sphere(1), [View("v", CAM, image)]), "median-color",
+                 EstimatorConfig(sh_order=2, directions=50))
+
+
+def test_faces_wound_against_their_neighbours_are_counted_and_named_in_a_warning():
+    """A few faces wound the other way run their shared edges in the same direction as their
+    neighbours: each such edge is a conflict (three for a lone face, four for a flipped pair),
+    counted in ``winding_conflicts`` and a warning; a consistent mesh has none."""
+    mesh = sphere(2)
+    assert not mesh.winding_conflicts().any()
+    faces = mesh.faces.copy()
+    faces[[3, 50, 51]] = faces[[3, 50, 51]][:, ::-1]
+    flipped = TriangleMesh(mesh.vertices, faces)
+    pair = flipped.face_adjacency
+    adjacent = {tuple(p) for p in pair.tolist()}
+    assert (50, 51) in adjacent and not ({3} & {50, 51})
+    conflicts = flipped.winding_conflicts()
+    assert int(conflicts.sum()) == 3 + 4
+    assert set(np.unique(pair[conflicts]).tolist()) >= {3, 50, 51}
+    est = estimate(MultiViewData(flipped, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
+                   EstimatorConfig(sh_order=2, directions=50))
+    assert est.info["winding_conflicts"] == 7
+    assert any(w.startswith("7 edge(s) of the mesh join faces wound in opposite directions")
+               for w in est.info["warnings"])

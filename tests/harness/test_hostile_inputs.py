@@ -382,7 +382,7 @@ def test_black_or_negated_images_name_the_cause(copy, tmp_path, capsys):
         image = read_exr(ds / "images" / name)
         image[..., :3] = 0.0
         write_exr(ds / "images" / name, image)
-    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "black or negative", inputs=[ds],
+    expect_error(capsys, ["estimate", ds, "-o", tmp_path / "r"], "every view shows the mesh black", inputs=[ds],
                  absent=[tmp_path / "r"])
 
 
