@@ -148,8 +148,10 @@ class TriangleMesh:
         # each adjacent pair's verdict, looked up by its key (pairs listed once, lower index first)
         keys = pairs[:, 0] * len(f) + pairs[:, 1]
         unique, first = np.unique(keys, return_index=True)
-        where = np.searchsorted(unique, adjacency[:, 0] * len(f) + adjacency[:, 1])
-        return conflict[first[where]]
+        wanted = adjacency[:, 0] * len(f) + adjacency[:, 1]
+        where = np.minimum(np.searchsorted(unique, wanted), len(unique) - 1)
+        # a pair around a non-manifold edge may be listed here in another order: no verdict
+        return (unique[where] == wanted) & conflict[first[where]]
 
     @property
     def bounds_centre(self) -> np.ndarray:

@@ -450,6 +450,10 @@ def test_faces_wound_against_their_neighbours_are_counted_and_named_in_a_warning
     conflicts = flipped.winding_conflicts()
     assert int(conflicts.sum()) == 3 + 4
     assert set(np.unique(pair[conflicts]).tolist()) >= {3, 50, 51}
+    # three faces around one edge (non-manifold): judged where the adjacency lists the pair
+    fan = TriangleMesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [1, 1, 1]], float),
+                       np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 5, 2]]))
+    assert fan.winding_conflicts().shape == (len(fan.face_adjacency),)
     est = estimate(MultiViewData(flipped, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
                    EstimatorConfig(sh_order=2, directions=50))
     assert est.info["winding_conflicts"] == 7
