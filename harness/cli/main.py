@@ -516,6 +516,9 @@ def cmd_render(args) -> int:
                                  f"{view.name}, beyond any image's range ({limit:.3g}): its light or albedos in "
                                  "estimate.npz are absurd")
             name = os.path.splitext(os.path.basename(view.name))[0] + ".exr"
+            # alpha 0 on the pixels of unestimated faces too: their colour 0 is no prediction
+            face = predictor.caster.face_id_buffer(view.camera)
+            coverage = coverage * est.observed[np.maximum(face, 0)]
             write_exr(os.path.join(tmp, name), np.concatenate([rgb, coverage[..., None]], axis=2))
     print(f"{len(views)} predicted images written to {os.path.abspath(args.output)}")
     return 0
@@ -751,7 +754,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_estimator_flags(e)
     e.set_defaults(func=cmd_estimate)
 
-    r = sub.add_parser("render", help="predict images of a dataset's cameras from an estimate")
+    r = sub.add_parser("render", help="predict images of a dataset's cameras from an estimate (RGBA EXRs: alpha "
+                       "0 off the mesh and on unestimated faces)")
     r.add_argument("run")
     r.add_argument("--dataset", help="dataset folder (default: the one the run was made from)")
     r.add_argument("-o", "--output", required=True)

@@ -124,10 +124,15 @@ def check_overlap(mesh: TriangleMesh, textured: TriangleMesh, path: str) -> None
 
 
 def _texture_faces(mesh: TriangleMesh, textured: TriangleMesh, uv: np.ndarray, path: str, raw: bool = False,
-                   nearest: bool = False) -> np.ndarray:
-    values = face_values_from_texture(mesh, textured, uv, read_linear_rgb(path, raw), nearest)
+                   nearest: bool = False, alpha: bool = False) -> np.ndarray:
+    """(F, 3) per-face values of the texture at ``path``. With ``alpha``, NaN (unestimated) for
+    a face whose texels are mostly transparent: ``export-texture`` marks the faces an estimate
+    left unestimated with alpha 0 (a Mitsuba bitmap's alpha is no part of an albedo)."""
+    values = face_values_from_texture(mesh, textured, uv, read_linear_rgb(path, raw, alpha=alpha), nearest)
     if not np.all(np.isfinite(values)):
         raise InputError(f"{path}: the texture (or the mesh's UVs) gives NaN or Inf albedos")
+    if values.shape[1] == 4:
+        values = np.where(values[:, 3:] >= 0.5, values[:, :3], np.nan)
     return values
 
 
@@ -154,7 +159,10 @@ def read_uv_textures(mesh: TriangleMesh, mesh_path: str, diffuse_path: str, spec
     out = {"diffuse": None, "specular": None, "radiance_sh": None, "pseudo_sh": None}
     for key, path in (("diffuse", diffuse_path), ("specular", specular_path)):
         if path:
-            out[key] = _texture_faces(mesh, textured, uv, path)
+            out[key] = _texture_faces(mesh, textured, uv, path, alpha=True)
+    if out["diffuse"] is not None and out["specular"] is not None:   # unestimated in either map: in both
+        missing = np.isnan(out["diffuse"]).any(axis=1) | np.isnan(out["specular"]).any(axis=1)
+        out["diffuse"][missing] = out["specular"][missing] = np.nan
     if envmap_path:
         out["radiance_sh"] = _envmap_sh(envmap_path, order)
     return out

@@ -89,7 +89,9 @@ def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarr
     counts; ``radiance.from`` names the light in ``radiance.exr``). The PNGs are
     8-bit sRGB of the albedo times ``png_scale`` (so the brightest 0.5 % saturate at most:
     the estimate's albedo is in the light's unit-DC gauge, not bounded by 1); the EXRs are
-    the linear albedo itself. Unestimated faces are black. The mesh's own UVs are used when
+    the linear albedo itself. Both carry an alpha channel, 0 on the texels of faces the estimate
+    left unestimated (their colour 0 is no albedo; ``texture.json`` counts them, and
+    ``import --from uv-textures`` reads them back as unestimated). The mesh's own UVs are used when
     they lie in [0, 1]; otherwise (UDIM tiles, tiling) the mesh is unwrapped with xatlas, as
     one texture cannot hold several tiles.
     """
@@ -104,15 +106,16 @@ def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarr
         uv, source = None, "xatlas (the mesh's own UVs leave [0, 1]: UDIM tiles or tiling)"
     vertices, faces, uvs = uv_atlas(mesh, uv)
     summary = {"faces": int(len(faces)), "vertices": int(len(vertices)), "size": int(size),
-               "uv_source": source, "png_scale": {}}
+               "uv_source": source, "png_scale": {}, "unestimated_faces": int((~est.observed).sum())}
     images = {}
+    estimated = bake(faces, uvs, est.observed[:, None].astype(np.float32), size)[0][..., 0]   # 1 or 0 per texel
     for name in ("diffuse", "specular"):
         values = np.where(est.observed[:, None], getattr(est, name), 0.0)
         texture, covered = bake(faces, uvs, values, size)
         top = float(np.percentile(values[est.observed], 99.5)) if est.observed.any() else 1.0
         scale = 1.0 / top if top > 1.0 else 1.0
-        write_exr(os.path.join(folder, f"{name}.exr"), texture)
-        images[name] = Image.fromarray(srgb8(texture * scale))
+        write_exr(os.path.join(folder, f"{name}.exr"), np.dstack([texture, estimated]))
+        images[name] = Image.fromarray(np.dstack([srgb8(texture * scale), (255 * estimated).astype(np.uint8)]))
         images[name].save(os.path.join(folder, f"{name}.png"))
         summary["png_scale"][name] = scale
         summary["covered_share"] = float(covered.mean())

@@ -1,6 +1,8 @@
 import json
 import os
 
+import numpy as np
+
 from harness.cli.main import main
 from harness.io.exr import read_exr
 from harness.io.runs import read_run
@@ -26,7 +28,18 @@ def test_estimate_and_render_commands(tiny_earth, tmp_path, capsys):
     assert main(["render", str(run), "-o", str(out), "--rotate-illumination", "y", "45"]) == 0
     images = sorted(os.listdir(out))
     assert images == [".pseudolight-output", "test_000.exr", "test_001.exr"]
-    assert read_exr(out / images[1]).shape == (96, 96, 4)
+    predicted = read_exr(out / images[1])
+    assert predicted.shape == (96, 96, 4)
+    # alpha 1 exactly on the pixels of estimated faces: 0 off the mesh and on unestimated faces
+    # (faces no training view kept, which a test view shows)
+    from estimator import RayCaster
+    from harness.io.dataset import read_dataset
+
+    ds = read_dataset(tiny_earth, load_test=True, load_truth=False)
+    face = RayCaster(ds.data.mesh).face_id_buffer(ds.data.test_views[0].camera)   # test_000
+    estimated = (face >= 0) & est.observed[np.maximum(face, 0)]
+    assert ((face >= 0) & ~estimated).any()
+    np.testing.assert_array_equal(predicted[..., 3], estimated)
     capsys.readouterr()
 
 

@@ -3,12 +3,12 @@ import json
 import os
 
 import numpy as np
-import OpenEXR
 import trimesh
 from PIL import Image
 
 from estimator import uv_atlas
 from harness.cli.main import main
+from harness.io.exr import read_exr
 from harness.io.runs import read_run
 from harness.io.texture import bake, sample, srgb8
 from harness.scene.geometry import icosphere
@@ -43,10 +43,10 @@ def test_export_texture_command(micro, tmp_path):  # noqa: F811
     assert image.size == (256, 256)
     # the EXR gives the linear albedo exactly, the PNG within 1/255 in sRGB, at each face centroid
     centroids = uv[np.asarray(glb.faces)].mean(axis=1)
-    with OpenEXR.File(str(out / "diffuse.exr")) as f:
-        exr = np.asarray(f.channels()["RGB"].pixels)
+    exr = read_exr(out / "diffuse.exr")
+    assert exr.shape == (256, 256, 4)
     observed = est.observed
-    np.testing.assert_allclose(sample(exr, centroids)[observed], est.diffuse[observed], rtol=1e-6)
+    np.testing.assert_allclose(sample(exr, centroids)[observed, :3], est.diffuse[observed], rtol=1e-6)
     png = np.asarray(Image.open(out / "diffuse.png"), dtype=np.float64)[..., :3]
     expected = srgb8(est.diffuse * meta["png_scale"]["diffuse"]).astype(np.float64)
     assert np.abs(sample(png, centroids)[observed] - expected[observed]).max() <= 1.0
@@ -80,6 +80,37 @@ def test_uvs_outside_the_unit_square_are_unwrapped_not_clamped(tmp_path):
     glb = trimesh.load(tmp_path / "mesh.glb", force="mesh", process=False)
     uv = np.asarray(glb.visual.uv)
     assert uv.min() >= 0 and uv.max() <= 1
-    with OpenEXR.File(str(tmp_path / "diffuse.exr")) as exr:
-        texture = np.asarray(exr.channels()["RGB"].pixels)
+    texture = read_exr(tmp_path / "diffuse.exr")[..., :3]
     np.testing.assert_allclose(sample(texture, uv[np.asarray(glb.faces)].mean(axis=1)), values, rtol=1e-6)
+
+
+def test_unestimated_faces_are_transparent_in_the_maps_and_come_back_unestimated(tmp_path):
+    """A face the estimate left unestimated is written with alpha 0 (its colour 0 is no albedo)
+    in both maps, EXR and PNG, and counted in texture.json; reading the maps back
+    (``import --from uv-textures``) leaves exactly those faces unestimated, in both albedos, and
+    gives every other face its albedo."""
+    from estimator import Estimate, EstimatorConfig
+    from harness.io.imports import read_uv_textures
+    from harness.io.texture import export_textures
+
+    mesh = icosphere(2)
+    f = mesh.num_faces
+    values = 0.1 + 0.8 * np.random.default_rng(2).random((f, 3))
+    observed = np.ones(f, bool)
+    observed[[3, 17, 40, 41]] = False
+    est = Estimate(np.where(observed[:, None], values, 0.0), 0.5 * np.where(observed[:, None], values, 0.0),
+                   np.eye(9, 3), np.where(observed, np.arange(f), -1), observed, "t", EstimatorConfig())
+    summary = export_textures(str(tmp_path), mesh, est, size=512)
+    assert summary["unestimated_faces"] == 4
+    glb = trimesh.load(tmp_path / "mesh.glb", force="mesh", process=False)
+    centroids = np.asarray(glb.visual.uv)[np.asarray(glb.faces)].mean(axis=1)
+    for name in ("diffuse", "specular"):
+        assert read_exr(tmp_path / f"{name}.exr")[..., 3].min() == 0.0
+        np.testing.assert_array_equal(sample(read_exr(tmp_path / f"{name}.exr"), centroids)[:, 3], observed)
+        png = np.asarray(Image.open(tmp_path / f"{name}.png"))
+        np.testing.assert_array_equal(sample(png, centroids)[:, 3], 255 * observed)
+    back = read_uv_textures(mesh, str(tmp_path / "mesh.obj"), str(tmp_path / "diffuse.exr"),
+                            str(tmp_path / "specular.exr"))
+    for name, scale in (("diffuse", 1.0), ("specular", 0.5)):
+        np.testing.assert_array_equal(np.isnan(back[name]).any(axis=1), ~observed)
+        np.testing.assert_allclose(back[name][observed], scale * values[observed], rtol=0.05)
