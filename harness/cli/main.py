@@ -189,9 +189,23 @@ def _check_json_target(path: str, inputs: list) -> str:
         raise OutputError(f"{path} is a folder, not a file")
     parent = os.path.dirname(target)
     if not os.path.isdir(parent):
-        raise OutputError(f"cannot write {path}: {parent} is not a folder")
+        why = "is not a folder" if os.path.exists(parent) else "does not exist"
+        raise OutputError(f"cannot write {path}: {parent} {why}")
     writable(parent, path)
     return target
+
+
+def _existing_baseline(path: str) -> None:
+    """Refuse to replace ``path`` unless it is a baseline already (updating a baseline is what
+    ``--write-baseline`` is for; any other file needs ``--overwrite``)."""
+    from reports.regression import validate_baseline
+
+    try:
+        with open(path) as f:
+            validate_baseline(json.load(f), path)
+    except (OSError, ValueError) as exc:
+        raise OutputError(f"--write-baseline {path} exists and is not a baseline ({exc}); pass --overwrite to "
+                          "replace it") from None
 
 
 def _write_json_file(path: str, value: dict, inputs: list) -> None:
@@ -221,6 +235,8 @@ def cmd_report(args) -> int:
     check_output(args.output, inputs, args.overwrite)
     if args.write_baseline:
         _check_json_target(args.write_baseline, inputs)
+        if os.path.exists(args.write_baseline) and not args.overwrite:
+            _existing_baseline(args.write_baseline)
     baseline = _load_baseline(args.baseline)
     metrics, regressions = build_report(args.run, args.output, dataset, rotation, args.cross_check_spp,
                                         not args.no_mitsuba, baseline, args.overwrite, log=_err,

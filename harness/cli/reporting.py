@@ -63,7 +63,8 @@ def open_run(run_dir: str, dataset_dir: str | None, out_dir: str, overwrite: boo
         differ = [k for k in match if recorded.get(k) != current[k]]
         if differ:
             raise InputError(f"the run {run_dir} was estimated from {run['dataset']}, whose {', '.join(differ)} "
-                             f"differ from those of {ds.path}: use it with its own dataset")
+                             f"{'differs' if len(differ) == 1 else 'differ'} from {ds.path}'s: use it with its own "
+                             "dataset")
     return est, run, ds, inputs
 
 
@@ -178,6 +179,8 @@ def find_metrics(folder: str) -> str:
     for candidate in (os.path.join(folder, "metrics.json"), os.path.join(folder, "report", "metrics.json")):
         if os.path.isfile(candidate):
             return candidate
+    if not os.path.isdir(folder):
+        raise RunError(f"report folder not found: {folder}")
     raise RunError(f"{folder} has no metrics.json (nor report/metrics.json): run `pseudolight report` first")
 
 

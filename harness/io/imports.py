@@ -73,6 +73,10 @@ def read_per_face(path: str, num_faces: int) -> dict:  # noqa: C901  (one check 
                 rows = list(csv.DictReader(f))
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise InputError(f"{path}: unreadable CSV ({exc})") from None
+        # DictReader files a row's cells beyond the header under the key None: a shifted row
+        ragged = next((n for n, r in enumerate(rows, start=2) if None in r), None)
+        if ragged is not None:
+            raise InputError(f"{path}: line {ragged} has more cells than the header names")
         for component in ("diffuse", "specular"):
             columns = [f"{component}_{c}" for c in CHANNELS]
             if rows and all(c in rows[0] for c in columns):

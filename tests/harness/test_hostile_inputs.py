@@ -574,6 +574,28 @@ def test_files_read_from_outside_the_dataset_are_inputs_too(copy, tmp_path, caps
                           run / "run.json"], "run.json", inputs=[run], absent=[tmp_path / "rep"])
 
 
+def test_write_baseline_replaces_a_baseline_but_no_other_file_without_overwrite(copy, tmp_path, capsys):
+    """Updating a baseline is what --write-baseline is for; an existing file that is no baseline
+    is kept unless --overwrite; a folder that does not exist is named as such."""
+    _, run, _ = copy
+    other = tmp_path / "notes.json"
+    other.write_text('{"mine": 1}')
+    expect_error(capsys, ["report", run, "-o", tmp_path / "rep", "--no-mitsuba", "--no-figures", "--write-baseline",
+                          other], "--write-baseline", "is not a baseline", "--overwrite", inputs=[other],
+                 absent=[tmp_path / "rep"])
+    baseline = tmp_path / "baseline.json"
+    argv = ["report", str(run), "--no-mitsuba", "--no-figures", "--write-baseline", str(baseline)]
+    assert main(argv[:2] + ["-o", str(tmp_path / "r1")] + argv[2:]) == 0
+    first = baseline.read_text()
+    assert main(argv[:2] + ["-o", str(tmp_path / "r2")] + argv[2:]) == 0   # a baseline is replaced
+    assert json.loads(baseline.read_text())["metrics"] == json.loads(first)["metrics"]
+    assert main(argv[:2] + ["-o", str(tmp_path / "r3"), "--overwrite"] + argv[2:-1] + [str(other)]) == 0
+    assert "metrics" in json.loads(other.read_text())
+    expect_error(capsys, ["report", run, "-o", tmp_path / "r4", "--no-mitsuba", "--write-baseline",
+                          tmp_path / "nowhere" / "b.json"], "nowhere does not exist", absent=[tmp_path / "r4"])
+    capsys.readouterr()
+
+
 def test_rendering_a_run_whose_light_is_beyond_any_image_names_the_run(copy, tmp_path, capsys):
     """A light and albedos each within float32 whose predicted pixels overflow an EXR's float32:
     the run's estimate is named as the cause, not the output folder, and nothing is written."""

@@ -70,6 +70,11 @@ def test_csv_import_and_its_errors(tiny_earth, tmp_path, capsys):
     assert main(["import", tiny_earth, "--from", "per-face", "--file", str(tmp_path / "short.csv"),
                  "-o", str(tmp_path / "r2")]) == 2
     assert f"must be ({f}, 3)" in capsys.readouterr().err and not (tmp_path / "r2").exists()
+    ragged = rows[:5] + ["0.5,0.4,0.3,0.9"] + rows[6:]     # a cell more than the header: a shifted row
+    (tmp_path / "ragged.csv").write_text("\n".join(ragged))
+    assert main(["import", tiny_earth, "--from", "per-face", "--file", str(tmp_path / "ragged.csv"),
+                 "-o", str(tmp_path / "r4")]) == 2
+    assert "line 6 has more cells than the header names" in capsys.readouterr().err
     assert main(["import", tiny_earth, "--from", "uv-textures", "-o", str(tmp_path / "r3")]) == 2
     assert "needs --mesh" in capsys.readouterr().err
 
