@@ -200,12 +200,6 @@ def _fit(data: MultiViewData, cls, config: EstimatorConfig, known_sh, known_radi
     if not np.any(prep.obs.rgb > 0):
         raise InputError("every observed pixel is black or negative: there is no light to estimate from "
                          "(check the images' exposure and sign)")
-    dark = [name for name, lit in zip(("red", "green", "blue"), np.any(prep.obs.rgb > 0, axis=0)) if not lit]
-    if dark:
-        named = " and ".join(dark)
-        raise InputError(f"the {named} channel is zero or negative in every observed pixel: the light (or the "
-                         f"camera) records no {named}, so no {named} albedo can be estimated; check the images' "
-                         "white balance and channel order")
     t = time.perf_counter()
     try:
         est = _solve(cls, prep, config, known_sh, known_radiance, log, exponent_candidates, prior)

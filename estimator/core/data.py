@@ -22,6 +22,15 @@ from .errors import InputError
 FLAT_TOLERANCE = 4 * 2.0 ** -23
 
 
+def _flat(corners: np.ndarray) -> np.ndarray:
+    """(F,) bool faces of ``corners`` (F, 3, 3) whose doubled area is within
+    :data:`FLAT_TOLERANCE` of the rounding of their coordinates (the tolerance scales with the
+    coordinates' size: far from the origin, float32 spaces them wider)."""
+    doubled = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    return doubled <= FLAT_TOLERANCE * np.abs(corners).max(axis=(1, 2)) * edge
+
+
 @dataclass(frozen=True)
 class TriangleMesh:
     """A triangle mesh whose face order is the identity of each face.
@@ -48,9 +57,9 @@ class TriangleMesh:
             raise InputError("mesh face indices must be integers in [0, V)")
         if not np.all(np.isfinite(v)):
             raise InputError("mesh vertices contain NaN or Inf")
-        c = v[f]
-        if not np.any(np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1) > 0):
-            raise InputError(f"mesh has no face with non-zero area ({f.shape[0]} degenerate faces)")
+        if np.all(_flat(v[f])):
+            raise InputError(f"mesh has no face with non-zero area ({f.shape[0]} degenerate faces, their area zero "
+                             "or within the rounding of their coordinates)")
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", np.ascontiguousarray(f, dtype=np.int64))
 
@@ -87,10 +96,7 @@ class TriangleMesh:
         """(F,) bool faces without a normal: a doubled area within :data:`FLAT_TOLERANCE` of the
         rounding of their coordinates (zero area, or collinear corners written in float32);
         computed once per mesh and read-only."""
-        c = self.corners
-        doubled = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
-        edge = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
-        flat = doubled <= FLAT_TOLERANCE * np.abs(c).max(axis=(1, 2)) * edge
+        flat = _flat(self.corners)
         flat.setflags(write=False)
         return flat
 
@@ -130,8 +136,9 @@ class TriangleMesh:
     def winding_conflicts(self) -> np.ndarray:
         """(E,) bool over :attr:`face_adjacency`: the two faces run their shared edge in the same
         direction, so one of them is wound the other way (consistent neighbours run it in
-        opposite directions). Pairs that share more than one edge, or an edge shared by more
-        than two faces (non-manifold), are judged on the first such edge found."""
+        opposite directions). An edge of more than two faces (non-manifold, or a double-sided
+        sheet whose coincident faces are wound apart on purpose) gives no verdict; pairs that
+        share two edges are judged on the first."""
         f = self.welded_faces
         start = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
         end = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
@@ -139,7 +146,10 @@ class TriangleMesh:
         low, high = np.minimum(start, end), np.maximum(start, end)
         order = np.lexsort((owner, high, low))
         low, high, owner, forward = low[order], high[order], owner[order], (start < end)[order]
-        same = (low[1:] == low[:-1]) & (high[1:] == high[:-1]) & (owner[1:] != owner[:-1])
+        starts = np.concatenate([[True], (low[1:] != low[:-1]) | (high[1:] != high[:-1])])
+        edge = np.cumsum(starts) - 1
+        manifold = np.bincount(edge)[edge] == 2   # per entry: its edge joins exactly two faces
+        same = ~starts[1:] & manifold[1:] & (owner[1:] != owner[:-1])
         pairs = np.sort(np.stack([owner[:-1][same], owner[1:][same]], axis=1), axis=1)
         conflict = forward[:-1][same] == forward[1:][same]
         adjacency = self.face_adjacency

@@ -226,14 +226,15 @@ def _add_neighbour_shares(views: list[dict], prep: Prepared) -> None:
     dirs = np.array([v.camera.center for v in prep.data.views]) - centre
     dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
     shares = np.array([np.nan if v["gross_share"] is None else v["gross_share"] for v in views])
-    exposures = np.array([v["exposure"] for v in views])
+    exposures = np.array([np.nan if v["exposure"] is None else v["exposure"] for v in views])
     cosines = dirs @ dirs.T
     np.fill_diagonal(cosines, -np.inf)
     nearest = np.argsort(-cosines, axis=1)[:, :NEIGHBOUR_VIEWS]
     for v, near in zip(views, nearest):
         known = shares[near][np.isfinite(shares[near])]
         v["neighbour_gross_share"] = float(np.median(known)) if len(known) else None
-        v["neighbour_exposure"] = float(np.median(exposures[near]))
+        known = exposures[near][np.isfinite(exposures[near])]
+        v["neighbour_exposure"] = float(np.median(known)) if len(known) else None
 
 
 def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict, dict[str, np.ndarray]]:
@@ -275,7 +276,8 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
                       "outlier_share": float(outlier[sel].mean()) if sel.any() else None,
                       "gross_share": float(gross[sel].mean()) if sel.any() else None,
                       "fault_share": float(fault[sel].mean()) if sel.any() else None,
-                      "exposure": float(exposure[v])})
+                      # None for a view without rows (rowless or black): the fit's 1 there is no figure
+                      "exposure": float(exposure[v]) if np.any(view == v) else None})
     _add_neighbour_shares(views, prep)
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -390,7 +392,7 @@ def _exposure_warnings(views: list[dict]) -> list[str]:
     shutter or aperture). Its colours disagree with every other view's by that factor; the
     solve follows it where it gives a face's lowest colours, so the gross-error share of the
     outlier-view check does not single it out."""
-    known = [v for v in views if v.get("neighbour_exposure")]
+    known = [v for v in views if v.get("exposure") and v.get("neighbour_exposure")]
     if len(known) <= NEIGHBOUR_VIEWS:
         return []
     diff = np.log([v["exposure"] / v["neighbour_exposure"] for v in known])

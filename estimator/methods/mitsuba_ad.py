@@ -218,7 +218,8 @@ class MitsubaAD(Method):
 
         data = prep.data
         mesh = data.mesh
-        views = data.views
+        black = set(prep.all_obs.black_views.tolist())   # a failed capture is no image to fit
+        views = [v for i, v in enumerate(data.views) if i not in black]
         first = views[0].camera
         factor = resolution_factor(first.width, first.height, c.ad_resolution)
         refs = [mi.TensorXf(downsample(v, factor)) for v in views]

@@ -788,7 +788,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--dataset", help="dataset folder (default: the one the run was made from)")
     rp.add_argument("-o", "--output", required=True, help="report folder to create")
     rp.add_argument("--baseline", help="metrics baseline JSON: exit 1 naming each metric that got worse")
-    rp.add_argument("--write-baseline", metavar="FILE", help="store this report's tracked metrics as a baseline")
+    rp.add_argument("--write-baseline", metavar="FILE",
+                    help="store this report's tracked metrics as a baseline (replaces an existing baseline; any "
+                         "other existing file only with --overwrite)")
     rp.add_argument("--rotate-illumination", nargs=2, metavar=("AXIS", "DEG"), default=["y", "90"],
                     help="relighting test: turn the light about x, y or z (default: y 90)")
     rp.add_argument("--cross-check-spp", type=_int_at_least(1, MAX_CROSS_CHECK_SPP),

@@ -68,13 +68,17 @@ def read_per_face(path: str, num_faces: int) -> dict:  # noqa: C901  (one check 
                 out[key] = coeffs
         return out
     if path.lower().endswith(".csv"):
+        rows, ragged = [], None
         try:
             with open(path, newline="", encoding="utf-8-sig") as f:
-                rows = list(csv.DictReader(f))
+                reader = csv.DictReader(f)
+                for row in reader:
+                    rows.append(row)
+                    # DictReader files a row's cells beyond the header under the key None: a shifted row
+                    if None in row and ragged is None:
+                        ragged = reader.line_num
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise InputError(f"{path}: unreadable CSV ({exc})") from None
-        # DictReader files a row's cells beyond the header under the key None: a shifted row
-        ragged = next((n for n, r in enumerate(rows, start=2) if None in r), None)
         if ragged is not None:
             raise InputError(f"{path}: line {ragged} has more cells than the header names")
         for component in ("diffuse", "specular"):
@@ -302,7 +306,7 @@ def read_mitsuba_xml(mesh: TriangleMesh, path: str, order: int = 10) -> dict:  #
             parts["specular"] += weight * albedo(element, "specular_reflectance", 1.0, "specular")
         else:
             raise InputError(f"{path}: BSDF type {kind!r} is not read; use diffuse, plastic, roughplastic, principled, "
-                             "or a blendbsdf of those with a conductor")
+                             "conductor or roughconductor (a specular albedo alone), or a blendbsdf of those")
 
     add(bsdf, 1.0)
     out = {**parts, "radiance_sh": None, "pseudo_sh": None, "textured": sorted(from_bitmap)}
@@ -428,8 +432,8 @@ def imported_estimate(arrays: dict, num_faces: int, source: str, exponent: float
     labels = np.full(num_faces, -1, dtype=np.int64)
     labels[observed] = np.unique(np.hstack([diffuse, specular])[observed], axis=0, return_inverse=True)[1].ravel()
     info = {"imported_from": source, "clusters": int(labels.max() + 1)}
-    with np.errstate(over="ignore", invalid="ignore"):
-        scaled = (diffuse * dc, specular * dc)
+    with np.errstate(over="ignore", invalid="ignore"):   # unestimated faces (NaN: transparent texels) hold 0
+        scaled = tuple(np.where(observed[:, None], a * dc, 0.0) for a in (diffuse, specular))
         finite = all(np.all(np.isfinite(a)) for a in scaled) and np.all(np.isfinite(pseudo / dc))
     if not finite or any(np.any(a > MAX_IMPORTED_ALBEDO) for a in scaled):
         raise InputError(f"{source}: the albedos times the light's mean (DC) {dc.tolist()} exceed "

@@ -24,6 +24,9 @@ def test_mesh_errors():
         TriangleMesh(np.zeros((3, 3)), np.array([[0, 1, 5]]))
     with pytest.raises(ValueError, match="NaN"):
         TriangleMesh(np.full((3, 3), np.nan), np.array([[0, 1, 2]]))
+    line = np.array([[10.0, 10.0, 10.0], [10.3, 10.7, 10.1], [10.9, 12.1, 10.3]], np.float32).astype(float)
+    with pytest.raises(ValueError, match="no face with non-zero area"):   # collinear to float32 rounding
+        TriangleMesh(line, np.array([[0, 1, 2]]))
 
 
 def test_a_mesh_computes_its_normals_and_centroids_once_read_only():
@@ -425,14 +428,16 @@ def test_a_view_that_shows_the_mesh_black_gives_no_row_and_is_named():
         gather_observations(caster, [black, View("black2", cams[0], np.zeros((48, 48, 3)))])
 
 
-def test_a_channel_no_pixel_records_is_named():
-    """A light (or camera) without green: the error names the channel instead of blaming the
-    faces' radiance."""
+def test_a_channel_no_pixel_records_is_named_where_the_light_is_fitted():
+    """A light (or camera) without green: the default, which fits the light to every channel,
+    names the channel; a method that fits no light still gives a green albedo of 0."""
     image = np.full((12, 16, 3), 0.5)
     image[..., 1] = 0.0
-    with pytest.raises(InputError, match="the green channel is zero or negative in every observed pixel"):
-        estimate(MultiViewData(sphere(1), [View("v", CAM, image)]), "median-color",
-                 EstimatorConfig(sh_order=2, directions=50))
+    data = MultiViewData(sphere(1), [View("v", CAM, image)])
+    with pytest.raises(InputError, match="the green channel is zero or negative in every observation"):
+        estimate(data, "retinex-segmented", EstimatorConfig(sh_order=2, directions=50))
+    est = estimate(data, "median-color", EstimatorConfig(sh_order=2, directions=50))
+    assert est.observed.any() and np.all(est.diffuse[est.observed, 1] == 0)
 
 
 def test_faces_wound_against_their_neighbours_are_counted_and_named_in_a_warning():
@@ -453,7 +458,12 @@ def test_faces_wound_against_their_neighbours_are_counted_and_named_in_a_warning
     # three faces around one edge (non-manifold): judged where the adjacency lists the pair
     fan = TriangleMesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [1, 1, 1]], float),
                        np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 5, 2]]))
-    assert fan.winding_conflicts().shape == (len(fan.face_adjacency),)
+    assert fan.winding_conflicts().shape == (len(fan.face_adjacency),) and not fan.winding_conflicts().any()
+    # a double-sided quad: each triangle twice, wound apart on purpose: no conflict
+    quad = np.array([[0, 1, 2], [0, 2, 3]])
+    corners = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    sheet = TriangleMesh(corners, np.vstack([quad, quad[:, ::-1]]))
+    assert len(sheet.face_adjacency) and not sheet.winding_conflicts().any()
     est = estimate(MultiViewData(flipped, [View("v", CAM, np.ones((12, 16, 3)))]), "median-color",
                    EstimatorConfig(sh_order=2, directions=50))
     assert est.info["winding_conflicts"] == 7

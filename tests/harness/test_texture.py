@@ -90,7 +90,7 @@ def test_unestimated_faces_are_transparent_in_the_maps_and_come_back_unestimated
     (``import --from uv-textures``) leaves exactly those faces unestimated, in both albedos, and
     gives every other face its albedo."""
     from estimator import Estimate, EstimatorConfig
-    from harness.io.imports import read_uv_textures
+    from harness.io.imports import imported_estimate, read_uv_textures
     from harness.io.texture import export_textures
 
     mesh = icosphere(2)
@@ -114,3 +114,6 @@ def test_unestimated_faces_are_transparent_in_the_maps_and_come_back_unestimated
     for name, scale in (("diffuse", 1.0), ("specular", 0.5)):
         np.testing.assert_array_equal(np.isnan(back[name]).any(axis=1), ~observed)
         np.testing.assert_allclose(back[name][observed], scale * values[observed], rtol=0.05)
+    imported = imported_estimate(back, f, "uv-textures")      # what import writes as a run
+    np.testing.assert_array_equal(imported.observed, observed)
+    assert np.all(np.isfinite(imported.diffuse)) and np.all(imported.diffuse[~observed] == 0)

@@ -150,12 +150,13 @@ def test_a_view_exposed_apart_from_its_neighbours_is_named_unless_the_views_spre
             v["exposure"], v["neighbour_exposure"] = r, 1.0
         return trust
 
-    steady = [1.0, 1.02, 0.98, 1.01, 0.99, 1.03, 0.97, 1.0]
+    steady = [1.0, 1.001, 0.999, 1.0005, 0.9995, 1.0015, 0.9985, 1.0]   # 6 scales: under 1 %
     lines = warnings_for(_with_trust(views(steady[:3] + [0.49] + steady[4:])))
     assert len(lines) == 1 and lines[0].startswith("view v3 is exposed 0.49x its neighbouring views")
     assert "view_gains=true" in lines[0]
     assert warnings_for(_with_trust(views(steady))) == []
     assert warnings_for(_with_trust(views(steady[:3] + [0.92] + steady[4:]))) == []      # within ±10 %
+    assert len(warnings_for(_with_trust(views(steady[:3] + [0.88] + steady[4:])))) == 1  # beyond it
     glossy = [1.0, 1.5, 0.6, 1.3, 0.7, 1.6, 0.55, 1.2]
     assert warnings_for(_with_trust(views(glossy[:3] + [0.49] + glossy[4:]))) == []
     assert warnings_for(_with_trust(views(steady[:3] + [0.49] + steady[4:]), view_gains={"v0": [1, 1, 1]})) == []

@@ -298,7 +298,12 @@ class RetinexSegmented(Method):
         # object itself: the direct light cannot explain its radiance, so it takes no part
         usable = np.all(np.isfinite(radiance) & (radiance > 0), axis=1) & (prep.c_matrix[:, 0] > 0)
         if not usable.any():
-            raise InputError("no face has a positive diffuse radiance in its kept views: nothing to estimate from")
+            dark = [name for name, lit in zip(("red", "green", "blue"), np.any(obs.rgb > 0, axis=0)) if not lit]
+            cause = (f": the {' and '.join(dark)} channel is zero or negative in every observation (a light or camera "
+                     "that records none of it, or albedos of 0 in it everywhere); the light is fitted to every "
+                     "channel's shading, so use a method that does not estimate it (median-color) or check the "
+                     "images' white balance and channel order") if dark else ""
+            raise InputError(f"no face has a positive diffuse radiance in its kept views{cause}")
         ctx = FitContext(prep, c, self.model, self.loss, fits, prep.edges, usable,
                          self._edge_fit_arguments(), recorded=recorded)
         if c.interreflection:
