@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from .core import sh
 from .light.coat import CoatConfig
 from .light.coat_map import CoatMapConfig
 from .light.edge_fit import EdgeFitConfig
@@ -39,6 +40,11 @@ class EstimatorConfig(ExposureConfig, PoseConfig, PeerConfig, RegionConfig, Segm
     """Every setting of the estimator (defaults follow the paper where it gives one); the
     sections document them. Refused with :class:`~estimator.core.errors.InputError` naming
     the setting when a value has the wrong type or lies outside its range."""
+
+    def check(self):
+        m = sh.num_coeffs(self.sh_order)
+        return [(self.retinex_max_edges >= m, f"retinex_max_edges must be at least the light's (sh_order + 1)^2 = "
+                                              f"{m} coefficients: fewer edges leave the edge fit's light undetermined")]
 
     def to_dict(self) -> dict:
         """The flat settings, in field order (the wire format)."""

@@ -70,7 +70,8 @@ class EdgeFitConfig(Section):
     retinex_max_edges : a fit over more usable edges than this runs on this many drawn at
         random (seed 0) and on the region rows of their faces: a light of at most 3 x 121
         coefficients is determined many times over by 20,000 equations, while a dense scan's
-        100k edges and more would cost time in proportion.
+        100k edges and more would cost time in proportion. At least the light's
+        (sh_order + 1)^2 coefficients (the estimator's config checks it).
     """
 
     retinex_quantile: float = 0.2

@@ -42,7 +42,8 @@ class ReflectionConfig(Section):
     diffuse_light : 'pseudo' (the paper: the diffuse term from the pseudo illumination) or
         'defiltered' (the pseudo illumination divided by the Phong filter up to
         ``defilter_order``, for exponent ``phong_exponent``).
-    defilter_order : highest SH degree that 'defiltered' divides by the Phong filter.
+    defilter_order : highest SH degree that 'defiltered' divides by the Phong filter (at
+        most ``sh_order`` there; the other lights do not read it).
     phong_exponent : exponent of the Phong lobe, for the models that depend on it.
     specular_model : 'mirror' (the paper's Eq. 10: the pseudo illumination at the mirror
         direction) or 'lobe' (the Phong lobe integrated over the sphere, cut by the face's
@@ -59,7 +60,9 @@ class ReflectionConfig(Section):
         checks = [
             (0 <= self.sh_order <= 30, "sh_order must lie in [0, 30]"),
             (self.diffuse_light in DIFFUSE_LIGHTS, f"diffuse_light must be one of {DIFFUSE_LIGHTS}"),
-            (0 <= self.defilter_order <= self.sh_order, "defilter_order must lie in [0, sh_order]"),
+            # read by the 'defiltered' light alone: another model takes any order
+            (self.defilter_order >= 0 and (self.diffuse_light != "defiltered" or self.defilter_order <= self.sh_order),
+             "defilter_order must lie in [0, sh_order]"),
             (self.phong_exponent > 0, "phong_exponent must be > 0"),
             (self.specular_model in SPECULAR_MODELS, f"specular_model must be one of {SPECULAR_MODELS}"),
         ]

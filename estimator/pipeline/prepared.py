@@ -37,7 +37,8 @@ class StreamingConfig(Section):
         observed faces, then every face's albedos with the light fixed: 121 light
         coefficients are determined many times over by 20,000 faces. The per-face methods
         draw them at random (seeded); the default solves on at most this many clusters of
-        faces (fewer on a mesh denser than its photos, ``retinex_segmented.clusters``).
+        faces (fewer on a mesh denser than its photos, ``retinex_segmented.clusters``). At
+        least the light's (sh_order + 1)^2 coefficients (:class:`PrepareConfig` checks it).
     """
 
     dense_rows: int = 1_500_000
@@ -52,6 +53,11 @@ class StreamingConfig(Section):
 class PrepareConfig(StreamingConfig, ObservationConfig, VisibilityConfig, BackendConfig, ReflectionConfig):
     """Every setting :func:`prepare` reads: the reflection model, the variant, the shadow
     function's directions, the observations and the streaming threshold."""
+
+    def check(self):
+        m = sh.num_coeffs(self.sh_order)
+        return [(self.light_faces >= m, f"light_faces must be at least the light's (sh_order + 1)^2 = {m} "
+                                        "coefficients: fewer faces leave the light undetermined")]
 
 
 @dataclass

@@ -54,7 +54,9 @@ def test_every_setting_has_one_section_and_one_default():
 
 @pytest.mark.parametrize("settings, named", [
     ({"sh_order": 31}, "sh_order"),
-    ({"defilter_order": 5, "sh_order": 3}, "defilter_order"),
+    ({"defilter_order": 5, "sh_order": 3, "diffuse_light": "defiltered"}, "defilter_order"),
+    ({"light_faces": 120}, r"light_faces must be at least the light's \(sh_order \+ 1\)\^2 = 121"),
+    ({"retinex_max_edges": 8, "sh_order": 2}, r"retinex_max_edges must be at least .* = 9"),
     ({"tol": float("nan")}, "tol"),
     ({"variant": 3}, "variant"),
     ({"blas_threads": -1}, "blas_threads"),
@@ -69,6 +71,15 @@ def test_every_setting_has_one_section_and_one_default():
 def test_a_bad_value_is_refused_naming_the_setting(settings, named):
     with pytest.raises(InputError, match=named):
         EstimatorConfig(**settings)
+
+
+def test_low_orders_build_with_the_other_defaults():
+    """sh_order 0 and 1 with every other setting at its default: defilter_order (2) is read by
+    the 'defiltered' light alone, so it does not refuse them; light_faces and retinex_max_edges
+    take any count from the light's coefficients up."""
+    for order in (0, 1):
+        assert EstimatorConfig(sh_order=order).sh_order == order
+    assert EstimatorConfig(sh_order=2, light_faces=9, retinex_max_edges=9).light_faces == 9
 
 
 def test_an_int_is_taken_for_a_float_and_stored_as_float():
