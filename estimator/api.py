@@ -128,17 +128,22 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
         f"{pose.POSE_MAX_SHIFT:g} x the distance): it keeps its silhouette-aligned pose" for p in poses or []
         if p["diverged"]] + ([
         f"pose refinement: {len(unaligned)} view(s) were not aligned in some round, the other views determining no "
-        f"estimate ({', '.join(unaligned[:5])}{' ...' if len(unaligned) > 5 else ''}; 'unaligned_rounds' in "
+        f"estimate ({_first(unaligned)}; 'unaligned_rounds' in "
         "'poses'): raise pose_folds, so that each held-out estimate has more views"] if unaligned else []) + ([
         f"pose refinement: the last alignment of {len(undone)} view(s) moved their alpha outline more than "
         f"{pose.POSE_OUTLINE_TOLERANCE:g} px off the mesh's, and farther than before, so it was undone and they keep "
-        f"their pose from before it ({', '.join(undone[:5])}{' ...' if len(undone) > 5 else ''}; 'outline_reverted' "
+        f"their pose from before it ({_first(undone)}; 'outline_reverted' "
         "in 'poses'): the estimate predicts these views poorly"] if undone else []) + ([
         f"after pose refinement the alpha outline of {len(off)} view(s) still lies more than "
         f"{pose.POSE_OUTLINE_TOLERANCE:g} px from the mesh's ({off[0]['name']}: {off[0]['outline_px']:.1f} px; "
         "'outline_px' in 'poses'): the refinement matched no pose to their silhouettes; check the intrinsics (focal "
         "length, principal point) and the mesh's scale against the images"] if off else [])
     return est
+
+
+def _first(names: list[str]) -> str:
+    """The first five of ``names``, comma-separated, then ' ...' where there are more."""
+    return ", ".join(names[:5]) + (" ..." if len(names) > 5 else "")
 
 
 def _rowless_warnings(names: list[str], min_pixels: int) -> list[str]:
@@ -150,7 +155,7 @@ def _rowless_warnings(names: list[str], min_pixels: int) -> list[str]:
     cause = "" if min_pixels == 1 else ", or min_pixels too high for their resolution"
     return [f"{len(names)} view(s) show the mesh but give no observation: no face covers {cover} (a camera far "
             f"from the object among nearer ones{cause}); faces that only they show stay unestimated "
-            f"({', '.join(names[:5])}{' ...' if len(names) > 5 else ''}; 'rowless_views')"]
+            f"({_first(names)}; 'rowless_views')"]
 
 
 def _black_warnings(names: list[str]) -> list[str]:
@@ -158,8 +163,7 @@ def _black_warnings(names: list[str]) -> list[str]:
     if not names:
         return []
     return [f"{len(names)} view(s) show the mesh black, no pixel on it above zero (a failed capture, or only the "
-            f"object's unlit side): they give no observation ({', '.join(names[:5])}"
-            f"{' ...' if len(names) > 5 else ''}; 'black_views')"]
+            f"object's unlit side): they give no observation ({_first(names)}; 'black_views')"]
 
 
 def _winding_warnings(conflicts: int) -> list[str]:

@@ -116,52 +116,43 @@ class TriangleMesh:
         welded.setflags(write=False)
         return welded
 
-    @cached_property
+    @property
     def face_adjacency(self) -> np.ndarray:
         """(E, 2) int64 pairs of faces that share an edge, two corners at the same positions
         (:attr:`welded_faces`), each pair once, lower index first; computed once per mesh
         (about 2 s at 1.3 M faces) and read-only."""
-        f = self.welded_faces
-        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-        owner = np.tile(np.arange(len(f)), 3)
-        order = np.lexsort((edges[:, 1], edges[:, 0]))
-        edges, owner = edges[order], owner[order]
-        same = np.all(edges[1:] == edges[:-1], axis=1)
-        pairs = np.stack([owner[:-1][same], owner[1:][same]], axis=1)
-        pairs = np.sort(pairs, axis=1)
-        pairs = np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
-        pairs.setflags(write=False)
-        return pairs
+        return self._shared_edges[0]
 
     def winding_conflicts(self) -> np.ndarray:
-        """(E,) bool over :attr:`face_adjacency`: the two faces run their shared edge in the same
+        """(E,) bool over :attr:`face_adjacency`: the two faces run a shared edge in the same
         direction, so one of them is wound the other way (consistent neighbours run it in
         opposite directions). An edge of more than two faces (non-manifold, or a double-sided
-        sheet whose coincident faces are wound apart on purpose) gives no verdict; pairs that
-        share two edges are judged on the first."""
+        sheet whose coincident faces are wound apart on purpose) gives no verdict."""
+        return self._shared_edges[1]
+
+    @cached_property
+    def _shared_edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """:attr:`face_adjacency` and :meth:`winding_conflicts` from one sort of the faces'
+        directed edges by their corners; both read-only."""
         f = self.welded_faces
-        start = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
-        end = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+        start, end = f.T.ravel(), f[:, [1, 2, 0]].T.ravel()   # each face's edges, in winding order
         owner = np.tile(np.arange(len(f)), 3)
         low, high = np.minimum(start, end), np.maximum(start, end)
-        order = np.lexsort((owner, high, low))
+        order = np.lexsort((high, low))
         low, high, owner, forward = low[order], high[order], owner[order], (start < end)[order]
         starts = np.concatenate([[True], (low[1:] != low[:-1]) | (high[1:] != high[:-1])])
         edge = np.cumsum(starts) - 1
         manifold = np.bincount(edge)[edge] == 2   # per entry: its edge joins exactly two faces
-        same = ~starts[1:] & manifold[1:] & (owner[1:] != owner[:-1])
+        same = ~starts[1:] & (owner[1:] != owner[:-1])
         pairs = np.sort(np.stack([owner[:-1][same], owner[1:][same]], axis=1), axis=1)
-        conflict = forward[:-1][same] == forward[1:][same]
-        adjacency = self.face_adjacency
-        if not len(adjacency):
-            return np.zeros(0, dtype=bool)
-        # each adjacent pair's verdict, looked up by its key (pairs listed once, lower index first)
-        keys = pairs[:, 0] * len(f) + pairs[:, 1]
-        unique, first = np.unique(keys, return_index=True)
-        wanted = adjacency[:, 0] * len(f) + adjacency[:, 1]
-        where = np.minimum(np.searchsorted(unique, wanted), len(unique) - 1)
-        # a pair around a non-manifold edge may be listed here in another order: no verdict
-        return (unique[where] == wanted) & conflict[first[where]]
+        conflict = ((forward[:-1] == forward[1:]) & manifold[1:])[same]
+        adjacency, row = np.unique(pairs.reshape(-1, 2), axis=0, return_inverse=True)
+        conflicts = np.zeros(len(adjacency), dtype=bool)
+        conflicts[row.ravel()[conflict]] = True
+        adjacency = adjacency.astype(np.int64)
+        for array in (adjacency, conflicts):
+            array.setflags(write=False)
+        return adjacency, conflicts
 
     @property
     def bounds_centre(self) -> np.ndarray:

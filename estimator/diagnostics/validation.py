@@ -37,7 +37,7 @@ def prediction_scores(est: Estimate, data: MultiViewData, indices: np.ndarray, a
             aligned = refine_view(view, predictor)[0]
             camera = aligned if plausible(view.camera, aligned, data.mesh.bounds_centre) else view.camera
         predicted, coverage = predictor.predict(camera)
-        mask = (coverage > 0) & np.any(predicted > 0, axis=2)
+        mask = (coverage > 0) & np.any(predicted > 0, axis=2)   # estimated faces, predicted lit
         if view.alpha is not None:
             mask &= view.alpha >= 0.999
         if not mask.any():

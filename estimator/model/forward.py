@@ -50,7 +50,8 @@ class Predictor:
         Returns
         -------
         rgb : (H, W, 3) float32 linear; 0 on background and unestimated faces.
-        coverage : (H, W) float32, 1 where the pixel centre sees the mesh.
+        coverage : (H, W) float32, 1 where the pixel centre sees an estimated face (0 off the
+            mesh and on unestimated faces, whose colour 0 is no prediction).
         """
         est = self.estimate
         face = self.caster.face_id_buffer(camera).ravel()
@@ -63,5 +64,5 @@ class Predictor:
         rgb = np.zeros((camera.height * camera.width, 3), dtype=np.float32)
         with np.errstate(over="ignore"):   # beyond float32: Inf, which the caller judges (an absurd estimate)
             rgb[hit] = value
-        coverage = (face >= 0).astype(np.float32)
+        coverage = ((face >= 0) & est.observed[np.maximum(face, 0)]).astype(np.float32)
         return rgb.reshape(camera.height, camera.width, 3), coverage.reshape(camera.height, camera.width)

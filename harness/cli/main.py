@@ -532,9 +532,6 @@ def cmd_render(args) -> int:
                                  f"{view.name}, beyond any image's range ({limit:.3g}): its light or albedos in "
                                  "estimate.npz are absurd")
             name = os.path.splitext(os.path.basename(view.name))[0] + ".exr"
-            # alpha 0 on the pixels of unestimated faces too: their colour 0 is no prediction
-            face = predictor.caster.face_id_buffer(view.camera)
-            coverage = coverage * est.observed[np.maximum(face, 0)]
             write_exr(os.path.join(tmp, name), np.concatenate([rgb, coverage[..., None]], axis=2))
     print(f"{len(views)} predicted images written to {os.path.abspath(args.output)}")
     return 0

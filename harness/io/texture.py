@@ -62,7 +62,9 @@ def srgb8(linear: np.ndarray) -> np.ndarray:
     return np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
 
 
-MAX_SIZE = 8192   # two float32 RGB maps of 8192^2, their 8-bit copies, the rasteriser's buffers: 5.4 GiB peak
+# both albedo maps and the alpha as one float32 map of 8192^2, their 8-bit copies, the rasteriser's
+# buffers: 6.1 GiB peak
+MAX_SIZE = 8192
 
 
 def material_mtl(png_scale: dict, exponent: float) -> str:
@@ -108,17 +110,20 @@ def export_textures(folder: str, mesh: TriangleMesh, est: Estimate, uv: np.ndarr
     summary = {"faces": int(len(faces)), "vertices": int(len(vertices)), "size": int(size),
                "uv_source": source, "png_scale": {}, "unestimated_faces": int((~est.observed).sum())}
     images = {}
-    estimated = bake(faces, uvs, est.observed[:, None].astype(np.float32), size)[0][..., 0]   # 1 or 0 per texel
-    for name in ("diffuse", "specular"):
-        values = np.where(est.observed[:, None], getattr(est, name), 0.0)
-        texture, covered = bake(faces, uvs, values, size)
+    albedos = {name: np.where(est.observed[:, None], getattr(est, name), 0.0) for name in ("diffuse", "specular")}
+    # one splat for both maps and the estimated faces' alpha (1 or 0 per texel)
+    baked, covered = bake(faces, uvs, np.hstack([albedos["diffuse"], albedos["specular"],
+                                                 est.observed[:, None]]), size)
+    estimated = baked[..., 6]
+    summary["covered_share"] = float(covered.mean())
+    for k, (name, values) in enumerate(albedos.items()):
+        texture = baked[..., 3 * k:3 * k + 3]
         top = float(np.percentile(values[est.observed], 99.5)) if est.observed.any() else 1.0
         scale = 1.0 / top if top > 1.0 else 1.0
         write_exr(os.path.join(folder, f"{name}.exr"), np.dstack([texture, estimated]))
         images[name] = Image.fromarray(np.dstack([srgb8(texture * scale), (255 * estimated).astype(np.uint8)]))
         images[name].save(os.path.join(folder, f"{name}.png"))
         summary["png_scale"][name] = scale
-        summary["covered_share"] = float(covered.mean())
     light = est.radiance_sh if est.radiance_sh is not None else est.pseudo_sh
     env = sh.to_latlong(light, 128, 256)
     write_exr(os.path.join(folder, "radiance.exr"), np.maximum(env, 0.0))
