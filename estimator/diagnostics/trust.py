@@ -281,7 +281,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     _add_neighbour_shares(views, prep)
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, residual, estimated, outlier))
+        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, residual, estimated, outlier, est.labels[obs.face]))
         rel_se = np.linalg.norm(albedo_se, axis=1) / np.linalg.norm(est.diffuse + est.specular, axis=1)
     counts = np.bincount(obs.face, minlength=f)
     good = est.observed & np.isfinite(rel_se)
@@ -307,14 +307,40 @@ def _outliers(relative: np.ndarray, estimated: np.ndarray) -> tuple[float, np.nd
 
 
 def _precision(face: np.ndarray, num_faces: int, rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray,
-               outlier: np.ndarray) -> np.ndarray:
+               outlier: np.ndarray, group: np.ndarray) -> np.ndarray:
     """(F, 3) precision of a per-face albedo with the light fixed: sum over its inlier rows of
     rows^2 (rows (N, 3): the albedo's coefficient in each observation) / sigma^2, sigma the
-    robust noise level of the residuals (N, 3) per channel; 0 where a face has no row."""
-    sigma = 1.4826 * np.median(np.abs(residual[estimated]), axis=0) if estimated.any() else np.ones(3)
+    noise level of the residuals (N, 3) per channel (:func:`noise_level`, ``group`` (N,) the
+    albedo each row's face takes); 0 where a face has no row, or no residual tells the noise."""
+    sigma = noise_level(rows, residual, estimated, group)
     info = np.stack([np.bincount(face, rows[:, k] ** 2 * ~outlier, minlength=num_faces) for k in range(3)], 1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.nan_to_num(info / np.maximum(sigma, 1e-300)[None] ** 2)
+        return np.nan_to_num(info / np.maximum(sigma, 1e-300)[None] ** 2, posinf=0.0)
+
+
+def noise_level(rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """(3,) robust noise level per channel: 1.4826 x the median absolute residual (N, 3) of the
+    ``estimated`` rows (N,) bool, each divided by sqrt(1 - h), h its leverage in the fit of its
+    group's albedo (``group`` (N,): one albedo per channel; h = row^2 over the sum of its
+    group's rows^2, ``rows`` (N, 3)). A fit of one albedo from n equal rows leaves residuals of
+    variance sigma^2 (1 - 1/n): the only row of its group is interpolated (h = 1, residual 0
+    whatever the noise) and says nothing of the noise, so it is left out. A mesh seen once per
+    face would otherwise claim a noise of 0 and every albedo exact. Infinite where no row is
+    left (nothing tells the noise: no precision is claimed)."""
+    index = np.nonzero(estimated)[0]
+    if not len(index):
+        return np.full(3, np.inf)
+    _, inverse = np.unique(group[index], return_inverse=True)
+    sigma = np.full(3, np.inf)
+    for k in range(3):
+        square = rows[index, k] ** 2
+        total = np.bincount(inverse, square)[inverse]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            leverage = np.where(total > 0, square / total, 0.0)
+        free = leverage < 1.0 - 1e-9
+        if free.any():
+            sigma[k] = 1.4826 * np.median(np.abs(residual[index[free], k]) / np.sqrt(1.0 - leverage[free]))
+    return sigma
 
 
 def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
@@ -324,8 +350,9 @@ def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndar
     estimated = est.observed[prep.obs.face]
     _, outlier = _outliers(relative, estimated)
     face, f = prep.obs.face, prep.obs.num_faces
-    return (_precision(face, f, shade, residual, estimated, outlier),
-            _precision(face, f, prep.gloss(est.light), residual, estimated, outlier))
+    group = est.labels[face]
+    return (_precision(face, f, shade, residual, estimated, outlier, group),
+            _precision(face, f, prep.gloss(est.light), residual, estimated, outlier, group))
 
 
 def _finite_or_none(value: float) -> float | None:

@@ -124,3 +124,30 @@ def test_faces_a_view_shows_but_the_method_left_out_are_counted_and_warned():
     assert not est.observed[reason == len(screening.REASONS)].any()
     assert sum(est.info["unestimated"].values()) + est.observed.sum() <= est.observed.size
     assert any(f"{left} left out by the method" in w for w in est.info["warnings"])
+
+
+def test_the_noise_level_is_read_from_residuals_no_fit_interpolates():
+    """Groups of 1-5 rows, each fitted with one albedo per channel by least squares, with
+    Gaussian noise of 0.01: the level from the residuals divided by sqrt(1 - leverage) is 0.01
+    within 5 % (10,000 groups), where their plain median absolute residual is 12 % or more low;
+    the groups of one row (residual 0, whatever the noise) are left out, and with no other row
+    no level is claimed (infinite) and no face gets a precision."""
+    from estimator.diagnostics.trust import _precision, noise_level
+
+    rng = np.random.default_rng(0)
+    sizes = rng.integers(1, 6, 10_000)
+    group = np.repeat(np.arange(len(sizes)), sizes)
+    rows = rng.uniform(0.2, 1.0, (len(group), 3))
+    data = 0.5 * rows + 0.01 * rng.normal(size=rows.shape)
+    fit = np.stack([np.bincount(group, rows[:, k] * data[:, k]) / np.bincount(group, rows[:, k] ** 2)
+                    for k in range(3)], 1)
+    residual = data - fit[group] * rows
+    everything = np.ones(len(group), bool)
+    np.testing.assert_allclose(noise_level(rows, residual, everything, group), 0.01, rtol=0.05)
+    assert np.all(1.4826 * np.median(np.abs(residual), axis=0) < 0.0088)
+    alone = sizes[group] == 1
+    assert np.all(np.abs(residual[alone]) < 1e-12)
+    assert np.all(np.isinf(noise_level(rows[alone], residual[alone], everything[alone], group[alone])))
+    precision = _precision(group[alone], len(sizes), rows[alone], residual[alone], everything[alone],
+                           np.zeros(alone.sum(), bool), group[alone])
+    assert np.all(precision == 0)
