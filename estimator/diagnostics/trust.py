@@ -311,11 +311,11 @@ def _precision(face: np.ndarray, num_faces: int, rows: np.ndarray, residual: np.
     """(F, 3) precision of a per-face albedo with the light fixed: sum over its inlier rows of
     rows^2 (rows (N, 3): the albedo's coefficient in each observation) / sigma^2, sigma the
     noise level of the residuals (N, 3) per channel (:func:`noise_level`, ``group`` (N,) the
-    albedo each row's face takes); 0 where a face has no row, or no residual tells the noise."""
+    albedo each row's face takes); 0 where a face has no row."""
     sigma = noise_level(rows, residual, estimated, group)
     info = np.stack([np.bincount(face, rows[:, k] ** 2 * ~outlier, minlength=num_faces) for k in range(3)], 1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.nan_to_num(info / np.maximum(sigma, 1e-300)[None] ** 2, posinf=0.0)
+        return np.nan_to_num(info / np.maximum(sigma, 1e-300)[None] ** 2)
 
 
 def noise_level(rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray, group: np.ndarray) -> np.ndarray:
@@ -324,9 +324,10 @@ def noise_level(rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray, g
     group's albedo (``group`` (N,): one albedo per channel; h = row^2 over the sum of its
     group's rows^2, ``rows`` (N, 3)). A fit of one albedo from n equal rows leaves residuals of
     variance sigma^2 (1 - 1/n): the only row of its group is interpolated (h = 1, residual 0
-    whatever the noise) and says nothing of the noise, so it is left out. A mesh seen once per
-    face would otherwise claim a noise of 0 and every albedo exact. Infinite where no row is
-    left (nothing tells the noise: no precision is claimed)."""
+    whatever the noise) and says nothing of the noise, so it is left out: a mesh seen once per
+    face would otherwise claim a noise of 0 and its faces' albedos exact beside faces seen
+    more often. Where no group has two rows (an exact fit, which the run warns is
+    underdetermined), the residuals as they are; infinite without an estimated row."""
     index = np.nonzero(estimated)[0]
     if not len(index):
         return np.full(3, np.inf)
@@ -338,8 +339,9 @@ def noise_level(rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray, g
         with np.errstate(divide="ignore", invalid="ignore"):
             leverage = np.where(total > 0, square / total, 0.0)
         free = leverage < 1.0 - 1e-9
-        if free.any():
-            sigma[k] = 1.4826 * np.median(np.abs(residual[index[free], k]) / np.sqrt(1.0 - leverage[free]))
+        if not free.any():
+            free, leverage = np.ones(len(index), bool), np.zeros(len(index))
+        sigma[k] = 1.4826 * np.median(np.abs(residual[index[free], k]) / np.sqrt(1.0 - leverage[free]))
     return sigma
 
 

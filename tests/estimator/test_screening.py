@@ -130,8 +130,9 @@ def test_the_noise_level_is_read_from_residuals_no_fit_interpolates():
     """Groups of 1-5 rows, each fitted with one albedo per channel by least squares, with
     Gaussian noise of 0.01: the level from the residuals divided by sqrt(1 - leverage) is 0.01
     within 5 % (10,000 groups), where their plain median absolute residual is 12 % or more low;
-    the groups of one row (residual 0, whatever the noise) are left out, and with no other row
-    no level is claimed (infinite) and no face gets a precision."""
+    the groups of one row (residual 0, whatever the noise) are left out; with no other row (an
+    exact fit, warned as underdetermined) the level is the residuals' as they are, and without
+    an estimated row it is infinite and no face gets a precision."""
     from estimator.diagnostics.trust import _precision, noise_level
 
     rng = np.random.default_rng(0)
@@ -147,7 +148,8 @@ def test_the_noise_level_is_read_from_residuals_no_fit_interpolates():
     assert np.all(1.4826 * np.median(np.abs(residual), axis=0) < 0.0088)
     alone = sizes[group] == 1
     assert np.all(np.abs(residual[alone]) < 1e-12)
-    assert np.all(np.isinf(noise_level(rows[alone], residual[alone], everything[alone], group[alone])))
-    precision = _precision(group[alone], len(sizes), rows[alone], residual[alone], everything[alone],
-                           np.zeros(alone.sum(), bool), group[alone])
-    assert np.all(precision == 0)
+    np.testing.assert_allclose(noise_level(rows[alone], residual[alone], everything[alone], group[alone]),
+                               1.4826 * np.median(np.abs(residual[alone]), axis=0))
+    nothing = np.zeros(len(group), bool)
+    assert np.all(np.isinf(noise_level(rows, residual, nothing, group)))
+    assert np.all(_precision(group, len(sizes), rows, residual, nothing, nothing, group) == 0)

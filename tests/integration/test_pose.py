@@ -181,7 +181,10 @@ def test_a_group_whose_held_out_estimate_fails_keeps_its_poses(tiny_earth_data):
     group = [i for i in range(len(data.views)) if i % 4 == 0]
     assert [p["unaligned_rounds"] for p in info] == [1 if i in group else 0 for i in range(len(data.views))]
     for i, (before, after) in enumerate(zip(bad.views, refined.views)):
-        assert np.array_equal(before.camera.c2w, after.camera.c2w) == (i in group)
+        kept = np.array_equal(before.camera.c2w, after.camera.c2w)
+        # the group's views wait; every other view is aligned, or its alignment beyond the
+        # plausible move is flagged 'diverged' and returned (at 96x96 px either can happen)
+        assert kept == (i in group) or (kept and info[i]["diverged"])
 
 
 def test_the_run_warns_of_views_left_unaligned(tiny_earth_data, monkeypatch):
