@@ -100,7 +100,8 @@ def decimate(mesh: TriangleMesh, keep: float, steps: int = 24) -> TriangleMesh:
     """The mesh simplified by vertex clustering to about ``keep`` x its faces: vertices in
     one cell of a cubic grid merge into their mean, collapsed and repeated faces go. The
     cell size is found by bisection on the face count (within 5 % of the target, or the
-    closest of ``steps`` tries)."""
+    closest of ``steps`` tries that keeps a mesh: at least 4 faces, so a target below what
+    clustering can reach gives the coarsest mesh it can, never an empty one)."""
     v, f = mesh.vertices, mesh.faces
     target = max(4, int(round(keep * len(f))))
     extent = float(np.ptp(v, axis=0).max())
@@ -116,6 +117,8 @@ def decimate(mesh: TriangleMesh, keep: float, steps: int = 24) -> TriangleMesh:
         faces = faces[ok]
         _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
         faces = faces[np.sort(first)]
+        if len(faces) < 4:   # collapsed past a mesh
+            return None
         used, compact = np.unique(faces, return_inverse=True)
         return TriangleMesh(centres[used], compact.reshape(-1, 3))
 
@@ -124,11 +127,12 @@ def decimate(mesh: TriangleMesh, keep: float, steps: int = 24) -> TriangleMesh:
     for _ in range(steps):
         cell = np.sqrt(lo * hi)
         out = cluster(cell)
-        if abs(out.num_faces - target) < abs(best.num_faces - target):
+        count = 0 if out is None else out.num_faces
+        if out is not None and abs(count - target) < abs(best.num_faces - target):
             best = out
-        if abs(out.num_faces - target) <= 0.05 * target:
+        if abs(count - target) <= 0.05 * target:
             break
-        lo, hi = (cell, hi) if out.num_faces > target else (lo, cell)
+        lo, hi = (cell, hi) if count > target else (lo, cell)
     return best
 
 

@@ -34,6 +34,21 @@ def build_mesh(spec: SceneSpec) -> tuple[TriangleMesh, np.ndarray | None]:
 
 
 def _albedo(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where: str, seed: int = 0) -> np.ndarray:
+    return reflectance(where, _albedo_values(mesh, uv, albedo, where, seed))
+
+
+def reflectance(where: str, values: np.ndarray) -> np.ndarray:
+    """``values`` (F, 3), refused with the spec key ``where`` named where some albedo exceeds 1:
+    an albedo is the share of the light a surface reflects, so the ground truth of a value
+    above it (a texture's scale, a typo) would describe no surface."""
+    top = float(np.max(values, initial=0.0))
+    if top > 1.0:
+        raise SpecError(f"{where} gives albedos up to {top:.4g}: an albedo is the share of the light reflected, "
+                        "at most 1 (lower its value, colours or scale)")
+    return values
+
+
+def _albedo_values(mesh: TriangleMesh, uv: np.ndarray | None, albedo: AlbedoSpec, where: str, seed: int) -> np.ndarray:
     if albedo.value is not None:
         return np.tile(np.asarray(albedo.value, float) * albedo.scale, (mesh.num_faces, 1))
     if albedo.pattern is not None:
@@ -54,6 +69,9 @@ def build_materials(mesh: TriangleMesh, spec: SceneSpec, uv: np.ndarray | None =
     m = spec.material
     if m.regions:
         labels = region_labels(mesh, [(r.axis, r.ranges) for r in m.regions])
+        for index, region in enumerate(m.regions):
+            for name in ("diffuse", "specular"):
+                reflectance(f"material.regions[{index}].{name}", np.array([getattr(region, name)], float))
         diffuse = np.array([r.diffuse for r in m.regions], float)[labels]
         specular = np.array([r.specular for r in m.regions], float)[labels]
         for index, region in enumerate(m.regions):
@@ -188,7 +206,15 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
     with atomic_directory(out_dir, overwrite=overwrite, inputs=spec.inputs(), kind="dataset") as tmp:
         scene = prepare(spec)
         train_cams, test_cams = make_cameras(spec.cameras), make_cameras(spec.cameras, test=True)
+        if scene.regions is not None:
+            empty = np.nonzero(np.bincount(scene.regions, minlength=len(spec.material.regions)) == 0)[0]
+            for k in empty:
+                say(f"warning: material.regions[{k}] ({spec.material.regions[k].name}) covers no face of the mesh "
+                    "(its bands hold no face centroid, or later regions take them all)")
         inside = cameras_inside(scene.mesh, train_cams + test_cams)
+        if len(inside) == len(train_cams) + len(test_cams):
+            raise SpecError(f"cameras.distance {spec.cameras.distance} puts every camera inside the mesh: the "
+                            "images would show only its inside; place the cameras outside the object")
         if inside:
             say(f"warning: {len(inside)} of {len(train_cams) + len(test_cams)} cameras lie inside the mesh "
                 f"(cameras.distance {spec.cameras.distance}): their images show the inside")

@@ -209,6 +209,14 @@ class MaterialSpec:
                 raise SpecError("material.regions cannot be combined with material.diffuse/specular")
             for i, region in enumerate(self.regions):
                 region.validate(f"material.regions[{i}]", base_dir)
+                # the first region is the base (every face no later region takes); each later one
+                # takes the faces in its bands: without bands it would take every face
+                if i == 0 and region.ranges:
+                    raise SpecError("material.regions[0] is the base region, which covers every face no later "
+                                    "region takes: give it no ranges")
+                if i > 0 and not region.ranges:
+                    raise SpecError(f"material.regions[{i}].ranges is empty: only the first region, the base, "
+                                    "covers every face; give this one [lo, hi] bands along its axis")
         else:
             self.diffuse = self.diffuse or AlbedoSpec(value=[0.0, 0.0, 0.0])
             self.specular = self.specular or AlbedoSpec(value=[0.0, 0.0, 0.0])

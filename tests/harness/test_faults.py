@@ -209,6 +209,15 @@ def test_decimation_keeps_about_the_asked_share_and_carries_the_truth(micro_pair
     assert "face_source" not in json.load(open(tmp_path / "d" / "transforms.json"))["faults"]
 
 
+def test_decimation_past_what_clustering_reaches_keeps_a_mesh():
+    """Asked for 2 % of 80 faces (target 4), the clustering never empties the mesh: the coarsest
+    mesh it finds has at least 4 faces."""
+    from harness.scene.geometry import icosphere
+
+    small = faults.decimate(icosphere(1), 0.02)
+    assert 4 <= small.num_faces < 80
+
+
 def test_generate_writes_a_decimated_mesh_with_its_truth(tmp_path):
     generate(load_spec(MICRO, overrides={"faults.decimate": 0.5}), str(tmp_path / "d"))
     ds = read_dataset(str(tmp_path / "d"))

@@ -420,11 +420,26 @@ def test_filesystem_errors_are_one_line(copy, tmp_path, capsys, monkeypatch):
     assert not [n for n in os.listdir(tmp_path) if "-partial-" in n]
 
 
-def test_cameras_inside_the_mesh_warn(tmp_path, capsys):
+def test_every_camera_inside_the_mesh_is_refused(tmp_path, capsys):
+    """Cameras that all lie inside a closed mesh would record only its inside (black images
+    the estimate refuses much later): generation refuses, names the key and writes nothing."""
     spec = tmp_path / "inside.toml"
     spec.write_text(open(MICRO).read().replace("distance = 4.0", "distance = 0.5"))
+    expect_error(capsys, ["generate", spec, "-o", tmp_path / "d"], "cameras.distance 0.5",
+                 "every camera inside the mesh", absent=[tmp_path / "d"])
+
+
+def test_a_region_that_covers_no_face_is_warned(tmp_path, capsys):
+    """A region whose bands hold no face centroid (or whose faces later regions take) is named,
+    and the dataset is written."""
+    spec = tmp_path / "sliver.toml"
+    spec.write_text(open(MICRO).read().replace(
+        'diffuse = { value = [0.5, 0.4, 0.3] }\nspecular = { value = [0.2, 0.2, 0.2] }',
+        '[[material.regions]]\nname = "base"\ndiffuse = [0.5, 0.4, 0.3]\n\n[[material.regions]]\nname = "sliver"\n'
+        'diffuse = [0.2, 0.2, 0.2]\nranges = [[0.99999, 1.0]]'))
     assert main(["generate", str(spec), "-o", str(tmp_path / "d")]) == 0
-    assert "7 of 7 cameras lie inside the mesh" in capsys.readouterr().err
+    assert "material.regions[1] (sliver) covers no face" in capsys.readouterr().err
+    assert os.path.exists(tmp_path / "d" / "transforms.json")
 
 
 def test_views_that_show_nothing_of_the_object_warn_and_estimate_names_the_framing(tmp_path, capsys):

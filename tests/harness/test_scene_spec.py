@@ -32,6 +32,9 @@ def _base(tmp_path):
     ({"illumination": {"type": "directional", "lights": [{"position": [0, 1, 0]}]}}, "illumination.lights[0]"),
     ({"geometry": {"type": "mesh"}}, "geometry.file"),
     ({"render": {"integrator": "direct"}, "illumination": {"type": "envmap", "file": "a.hdr"}}, "illumination.file"),
+    ({"material": {"regions": [{"name": "base", "ranges": [[0.0, 1.0]]}]}}, "material.regions[0] is the base"),
+    ({"material": {"regions": [{"name": "base"}, {"name": "top"}]}}, "material.regions[1].ranges is empty"),
+    ({"material": {"regions": [{"name": "base"}, {"name": "top", "ranges": []}]}}, "material.regions[1].ranges"),
 ])
 def test_bad_specs_name_the_key(tmp_path, patch, message):
     raw = _base(tmp_path)
@@ -132,3 +135,22 @@ def test_overrides_naming_an_unknown_top_level_key_are_refused(tmp_path):
     with pytest.raises(SpecError, match="spec.bogus"):
         parse_spec(raw, str(tmp_path), profile="p")
     assert parse_spec(_base(tmp_path), str(tmp_path), overrides={"cameras.width": 32}).cameras.width == 32
+
+
+@pytest.mark.parametrize("material, key", [
+    ({"diffuse": {"value": [0.5, 1.2, 0.5]}}, "material.diffuse"),
+    ({"specular": {"value": [3.0, 3.0, 3.0]}}, "material.specular"),
+    ({"diffuse": {"pattern": "checks", "colors": [[0.1, 0.1, 0.1], [0.9, 0.9, 0.9]], "scale": 2.0}},
+     "material.diffuse"),
+    ({"regions": [{"name": "base", "diffuse": [0.5, 0.5, 0.5]},
+                  {"name": "top", "diffuse": [1.5, 0.1, 0.1], "ranges": [[0.5, 1.0]]}]}, "material.regions[1].diffuse"),
+])
+def test_an_albedo_above_one_is_refused_by_its_key(tmp_path, material, key):
+    """A reflectance is at most 1: a value, a pattern's colours times its scale, or a region's
+    albedo above it would be a ground truth of no surface, and generation names the key."""
+    from harness.scene.generate import prepare
+
+    spec = parse_spec({**_base(tmp_path), "geometry": {"type": "icosphere", "subdivisions": 1},
+                       "material": material}, str(tmp_path))
+    with pytest.raises(SpecError, match=key.replace("[", r"\[").replace("]", r"\]") + " gives albedos up to"):
+        prepare(spec)
