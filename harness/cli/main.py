@@ -741,7 +741,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--views", type=_positive_int, help="number of training views")
     g.add_argument("--test-views", type=_count, help="number of held-out test views")
     g.add_argument("--spp", type=_positive_int, help="samples per pixel")
-    g.add_argument("--seed", type=_count)
+    g.add_argument("--seed", type=_int_at_least(0, 2 ** 31 - 1))
     g.add_argument("--variant", choices=VARIANTS + ("auto",))
     g.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override any spec key, e.g. --set faults.noise_read=0.05 (repeatable; TOML values)")

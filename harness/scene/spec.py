@@ -635,8 +635,10 @@ def parse_spec(raw: dict, base_dir: str, profile: str | None = None,
     _check_keys("spec", raw, SceneSpec)
     _check_finite("", raw)
     _check_finite("", overrides or {})
-    if "name" not in raw or not isinstance(raw["name"], str) or not raw["name"]:
+    if "name" not in raw:
         raise SpecError("spec.name is missing (a non-empty string)")
+    if not isinstance(raw["name"], str) or not raw["name"]:
+        raise SpecError(f"spec.name must be a non-empty string, got {raw['name']!r}")
     profiles = raw.get("profiles", {})
     if profile is not None:
         if profile not in profiles:

@@ -420,6 +420,11 @@ def test_filesystem_errors_are_one_line(copy, tmp_path, capsys, monkeypatch):
     assert not [n for n in os.listdir(tmp_path) if "-partial-" in n]
 
 
+def test_a_random_family_seed_out_of_range_names_the_flag(tmp_path, capsys):
+    expect_error(capsys, ["generate", "random", "--seed", "4294967296", "-o", tmp_path / "d"], "--seed",
+                 "[0, 2147483647]", absent=[tmp_path / "d"])
+
+
 def test_every_camera_inside_the_mesh_is_refused(tmp_path, capsys):
     """Cameras that all lie inside a closed mesh would record only its inside (black images
     the estimate refuses much later): generation refuses, names the key and writes nothing."""

@@ -32,6 +32,7 @@ def _base(tmp_path):
     ({"illumination": {"type": "directional", "lights": [{"position": [0, 1, 0]}]}}, "illumination.lights[0]"),
     ({"geometry": {"type": "mesh"}}, "geometry.file"),
     ({"render": {"integrator": "direct"}, "illumination": {"type": "envmap", "file": "a.hdr"}}, "illumination.file"),
+    ({"name": 5}, "spec.name must be a non-empty string, got 5"),
     ({"material": {"regions": [{"name": "base", "ranges": [[0.0, 1.0]]}]}}, "material.regions[0] is the base"),
     ({"material": {"regions": [{"name": "base"}, {"name": "top"}]}}, "material.regions[1].ranges is empty"),
     ({"material": {"regions": [{"name": "base"}, {"name": "top", "ranges": []}]}}, "material.regions[1].ranges"),
