@@ -268,7 +268,7 @@ def cmd_compare(args) -> int:
 
 def cmd_suite(args) -> int:
     from harness.sweep.executor import probe_scheduler
-    from harness.sweep.runner import claim_sweep_folder, run_sweep
+    from harness.sweep.runner import claim_sweep_folder, release_sweep_folder, run_sweep
     from harness.sweep.suite import load_suite
     from reports import sweep as sweep_report
     from reports.report import text_table
@@ -288,10 +288,15 @@ def cmd_suite(args) -> int:
         if backend.resolve_variant(args.variant) == "cuda_ad_rgb" and backend.cuda_device_count() == 0:
             raise InputError("--variant cuda_ad_rgb: this machine has no usable CUDA GPU (the driver reports none); "
                              "use --variant llvm_ad_rgb, or --executor dask with GPU workers")
-    claim_sweep_folder(args.output)
-    summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
-                        not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline,
-                        figures=not args.no_figures)
+    made = claim_sweep_folder(args.output, suite["name"])
+    try:
+        summary = run_sweep(suite, args.output, args.executor, args.jobs, args.scheduler, args.force,
+                            not args.no_mitsuba, args.variant, log=_err, baseline_rows=baseline,
+                            figures=not args.no_figures)
+    except BaseException:
+        if made:   # stopped before any job finished: no folder is left behind
+            release_sweep_folder(args.output)
+        raise
     for line in text_table(sweep_report.table_rows(summary["rows"]), sweep_report.TABLE_COLUMNS + SWEEP_METRICS):
         print(line)
     print(f"{summary['datasets']} datasets, {summary['runs']} runs: {summary['executed']} jobs run, "

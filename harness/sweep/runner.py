@@ -3,7 +3,9 @@ run, and write the comparison with one plot per sweep axis. Jobs are cached by i
 (``harness.sweep.jobs``): an interrupted sweep resumes, a finished one does no work.
 
 Layout: OUT/datasets/SCENE-ID/, OUT/runs/SCENE-ID-LABEL/{run,report,job.json},
-OUT/compare/{compare.html,compare.json,sweep.html,sweep.json}.
+OUT/compare/{compare.html,compare.json,sweep.html,sweep.json}; each row of sweep.json names its
+run folder relative to OUT/compare. The folder's marker names the suite, so a second suite is
+refused rather than replacing the first's comparison.
 """
 from __future__ import annotations
 
@@ -76,22 +78,47 @@ def _execute(fn, jobs, what, executor, workers, scheduler, log, gpus=0) -> dict[
 SWEEP_MARKER = ".pseudolight-sweep"   # a sweep folder: its cache of jobs may be resumed and its files replaced
 
 
-def claim_sweep_folder(out_dir: str) -> None:
-    """Make ``out_dir`` a sweep folder, or refuse it: it must be new, empty, or a sweep folder
-    already (it holds :data:`SWEEP_MARKER`); a folder of the user's is never written into."""
+def claim_sweep_folder(out_dir: str, suite_name: str) -> bool:
+    """Make ``out_dir`` the sweep folder of suite ``suite_name``, or refuse it: it must be new,
+    empty, or that suite's sweep folder already (it holds :data:`SWEEP_MARKER`, which names the
+    suite): a folder of the user's is never written into, and another suite's comparison is not
+    replaced. Returns whether the folder was made (or empty) here: an interrupted first run
+    removes it again (:func:`release_sweep_folder`)."""
     root = os.path.abspath(out_dir)
-    if os.path.lexists(root):
+    marker = os.path.join(root, SWEEP_MARKER)
+    made = not os.path.lexists(root)
+    if not made:
         if not os.path.isdir(root) or os.path.islink(root):
             raise OutputError(f"sweep output {root} exists and is not a folder")
-        if os.listdir(root) and not os.path.exists(os.path.join(root, SWEEP_MARKER)):
+        made = not os.listdir(root)
+        if not made and not os.path.exists(marker):
             raise OutputError(f"refusing to write the sweep into {root}: it is not empty and was not made by "
                               f"pseudolight bench (no {SWEEP_MARKER}); choose another -o")
+        if not made:
+            with open(marker) as f:
+                named = [line[len("suite: "):].strip() for line in f if line.startswith("suite: ")]
+            if named and named[0] != suite_name:
+                raise OutputError(f"refusing to write suite {suite_name!r} into {root}: it holds the sweep of suite "
+                                  f"{named[0]!r}, whose comparison it would replace; choose another -o")
     try:
         os.makedirs(root, exist_ok=True)
-        with open(os.path.join(root, SWEEP_MARKER), "w") as f:
-            f.write("pseudolight sweep folder: cached jobs, runs, reports and the comparison\n")
+        with open(marker, "w") as f:
+            f.write(f"pseudolight sweep folder: cached jobs, runs, reports and the comparison\nsuite: {suite_name}\n")
     except OSError as exc:
         raise OutputError(f"cannot write the sweep into {root}: {exc.strerror or exc}") from None
+    return made
+
+
+def release_sweep_folder(out_dir: str) -> None:
+    """Remove a sweep folder that holds nothing but its marker (a first run stopped before any
+    job finished), so that an interrupted sweep leaves no folder behind."""
+    root = os.path.abspath(out_dir)
+    try:
+        if os.listdir(root) == [SWEEP_MARKER]:
+            os.remove(os.path.join(root, SWEEP_MARKER))
+            os.rmdir(root)
+    except OSError:
+        pass
 
 
 def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int = 1, scheduler: str | None = None,
@@ -111,10 +138,11 @@ def run_sweep(suite: dict, out_dir: str, executor: str = "local", workers: int =
     datasets, runs = plan(suite, out_dir, mitsuba, force, variant, threads, figures)
     done_d = _execute(dataset_job, datasets, "dataset", executor, workers, scheduler, log, gpus)
     done_r = _execute(run_job, runs, "run", executor, workers, scheduler, log, gpus)
-    rows = [{"scene": r["scene"], "label": r["label"], "method": r["method"], "axes": r["axes"], "seed": r["seed"],
-             "run": r["folder"], "seconds": done_r[r["id"]]["estimate_seconds"],
-             **done_r[r["id"]]["metrics"]} for r in runs]
     compare_dir = os.path.join(out_dir, "compare")
+    # each row's run folder relative to sweep.json's own folder: the same wherever the sweep ran from
+    rows = [{"scene": r["scene"], "label": r["label"], "method": r["method"], "axes": r["axes"], "seed": r["seed"],
+             "run": os.path.relpath(r["folder"], compare_dir), "seconds": done_r[r["id"]]["estimate_seconds"],
+             **done_r[r["id"]]["metrics"]} for r in runs]
     compare_runs([os.path.join(r["folder"], "report") for r in runs], compare_dir, overwrite=True,
                  tags=[{"label": r["label"], "axes": r["axes"], "seed": r["seed"]} for r in runs])
     verdict = sweep_report.regressions(rows, baseline_rows) if baseline_rows is not None else None

@@ -109,7 +109,10 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:  # noqa: 
             EstimatorConfig(**params)
         except ValueError as exc:
             raise SpecError(f"{where}: params: {exc}") from None
-        methods.append(MethodEntry(str(m.get("label", m["method"])), m["method"], params))
+        label = m.get("label", m["method"])
+        if not isinstance(label, str) or not label.strip():
+            raise SpecError(f"{where}: label must be a non-empty string, got {label!r}")
+        methods.append(MethodEntry(label, m["method"], params))
     labels = [m.label for m in methods]
     if len(set(labels)) != len(labels):
         raise SpecError(f"{path}: method labels must be distinct, got {labels} (give each a 'label')")
@@ -132,6 +135,10 @@ def load_suite(path_or_name: str, profile: str | None = None) -> dict:  # noqa: 
             raise SpecError(f"{where}: sweep must map dotted spec keys to non-empty lists of values")
         if not isinstance(fixed, dict):
             raise SpecError(f"{where}: set must map dotted spec keys to values")
+        both = sorted(set(sweep) & set(fixed))
+        if both:
+            raise SpecError(f"{where}: {', '.join(both)} both swept and set: the sweep's values would replace the "
+                            "set one; keep it in one of them")
         axes = sorted(sweep)
         for axis in axes:
             if len({json.dumps(v, sort_keys=True) for v in sweep[axis]}) != len(sweep[axis]):

@@ -63,6 +63,10 @@ def test_a_run_reported_without_figures_is_not_reused_when_figures_are_asked(tmp
      "cameras.count"),
     ('methods = [{ method = "median-color", params = { sh_order = -1 } }]\nscenes = ["sparse-colored"]', "sh_order"),
     ('methods = ["median-color", "median-color"]\nscenes = ["sparse-colored"]', "labels must be distinct"),
+    ('methods = [{ method = "median-color", label = " " }]\nscenes = ["sparse-colored"]',
+     "label must be a non-empty string"),
+    ('methods = ["median-color"]\n[[scenes]]\nscene = "sparse-colored"\nsweep = { "render.spp" = [1, 2] }\n'
+     'set = { "render.spp" = 4 }', "render.spp both swept and set"),
 ])
 def test_bad_suites_name_the_problem(tmp_path, text, needle):
     with pytest.raises(SpecError, match=needle):
@@ -293,6 +297,26 @@ def test_a_port_that_does_not_speak_dask_is_refused_not_waited_on(silent_listene
     err = capsys.readouterr().err
     assert "no Dask handshake" in err and "Traceback" not in err
     assert not (tmp_path / "b").exists()
+
+
+def test_a_sweep_folder_is_claimed_by_its_suite_and_released_when_nothing_finished(tmp_path):
+    """The marker names the suite: the same suite may resume in its folder, another is refused
+    (it would replace the first's comparison); a first run stopped before any job finished
+    leaves no folder, a folder that holds jobs is kept."""
+    from harness.io.atomic import OutputError
+    from harness.sweep.runner import SWEEP_MARKER, claim_sweep_folder, release_sweep_folder
+
+    out = tmp_path / "sweep"
+    assert claim_sweep_folder(str(out), "first") is True
+    assert claim_sweep_folder(str(out), "first") is False                 # resumed
+    with pytest.raises(OutputError, match="holds the sweep of suite 'first'"):
+        claim_sweep_folder(str(out), "second")
+    release_sweep_folder(str(out))
+    assert not out.exists()
+    claim_sweep_folder(str(out), "first")
+    (out / "datasets").mkdir()
+    release_sweep_folder(str(out))
+    assert sorted(p.name for p in out.iterdir()) == [SWEEP_MARKER, "datasets"]
 
 
 def test_bench_never_writes_into_a_folder_of_the_users(tmp_path, capsys):
