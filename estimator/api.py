@@ -120,6 +120,7 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
                  key=lambda p: -p["outline_px"])
     unaligned = [p["name"] for p in poses or [] if p["unaligned_rounds"]]
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
+    small = [p["name"] for p in poses or [] if p.get("too_small")]
     flat, repeated = data.mesh.degenerate_faces()
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + _mesh_warnings(
         flat, repeated) + _rowless_warnings(rowless, config.min_pixels) + _black_warnings(black) + (
@@ -130,6 +131,9 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
         f"pose refinement: {len(unaligned)} view(s) were not aligned in some round, the other views determining no "
         f"estimate ({_first(unaligned)}; 'unaligned_rounds' in "
         "'poses'): raise pose_folds, so that each held-out estimate has more views"] if unaligned else []) + ([
+        f"pose refinement: {len(small)} view(s) show fewer than {pose.POSE_MIN_POINTS} pixels of estimated faces, "
+        f"too few to align, and keep their poses ({_first(small)}; 'too_small' in 'poses'): the object is too small "
+        "in them (bring the cameras closer or raise the resolution)"] if small else []) + ([
         f"pose refinement: the last alignment of {len(undone)} view(s) moved their alpha outline more than "
         f"{pose.POSE_OUTLINE_TOLERANCE:g} px off the mesh's, and farther than before, so it was undone and they keep "
         f"their pose from before it ({_first(undone)}; 'outline_reverted' "

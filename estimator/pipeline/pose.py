@@ -326,7 +326,7 @@ def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales:
     their prediction is filled from the known pixels around them before the blur
     (:func:`_fill_unestimated`). ``observed``: the view's kept levels (None: made here)."""
     cam = view.camera
-    info = {"pixels": 0, "cost": [0.0, 0.0]}
+    info = {"pixels": 0, "cost": [0.0, 0.0], "too_small": False}
     observed = observed or ObservedLevels(view)
     # the surface points and their predicted radiance, at the starting pose: a pose error of a
     # few pixels barely changes what a point looks like, only where it lands
@@ -336,6 +336,7 @@ def _refine(view: View, caster: RayCaster, predicted: np.ndarray | None, scales:
     if estimated is not None:   # a face without an estimate has no predicted radiance to align with
         face = np.where(estimated[np.maximum(face, 0)], face, -1)
     if np.count_nonzero(face >= 0) < POSE_MIN_POINTS or (predicted is None and observed.alpha is None):
+        info["too_small"] = bool(np.count_nonzero(face >= 0) < POSE_MIN_POINTS)
         return cam, info
     level, colour = 1.0, predicted is not None
     if not colour:

@@ -204,6 +204,20 @@ def test_the_run_warns_of_views_left_unaligned(tiny_earth_data, monkeypatch):
     assert any("were not aligned in some round" in w and "raise pose_folds" in w for w in est.info["warnings"])
 
 
+def test_views_too_small_to_align_keep_their_poses_and_are_named(tiny_earth_data, monkeypatch):
+    """A view with fewer than POSE_MIN_POINTS pixels of estimated faces is not aligned (here every
+    view, the bound raised past the tiny views' 1,400 pixels): none is aligned, each is marked
+    'too_small', and the run names them instead of reporting a median correction of 0."""
+    from estimator.pipeline import pose
+
+    monkeypatch.setattr(pose, "POSE_MIN_POINTS", 10 ** 6)
+    data = tiny_earth_data.data
+    est = estimate(data, "bilinear-per-face", dataclasses.replace(EARTH, pose_rounds=1))
+    assert all(p["too_small"] for p in est.info["poses"])
+    assert any(f"{len(data.views)} view(s) show fewer than 1000000 pixels" in w and "too few to align" in w
+               for w in est.info["warnings"])
+
+
 def test_pixel_hits_lie_on_the_pixel_rays_and_the_hit_faces(tiny_earth_data):
     from estimator.rays.raycast import RayCaster
 
