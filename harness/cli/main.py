@@ -339,15 +339,22 @@ def cmd_demo(args) -> int:
     """Generate the default scene, estimate with its recommended method, report against its baseline."""
     from harness.cli.suite import ensure_dataset, run_method
 
+    if not str(args.output).strip():   # an empty -o would resolve to the working directory
+        raise OutputError("the output path is empty; give -o a folder")
+    if os.path.isdir(args.output) and set(os.listdir(args.output)) - {DEFAULT_SCENE}:
+        raise OutputError(f"refusing to write the demo into {os.path.abspath(args.output)}: it holds other files "
+                          f"than the demo's {DEFAULT_SCENE}/ (a dataset, a run, your own); choose another -o")
     root = os.path.join(args.output, DEFAULT_SCENE)
     data_dir = os.path.join(root, "dataset")
     check_output(os.path.join(root, "run"), [SCENES_DIR], True, kind="run")
     t0 = time.perf_counter()
     ensure_dataset(DEFAULT_SCENE, data_dir, overwrite=args.overwrite, variant=args.variant, log=_err)
     baseline = os.path.join(SCENES_DIR, "baselines", f"{DEFAULT_SCENE}.json")
-    _, metrics, regressions = run_method(data_dir, None, os.path.join(root, "run"), os.path.join(root, "report"),
-                                         baseline=_load_baseline(baseline) if os.path.isfile(baseline) else None,
-                                         overrides={"variant": args.variant} if args.variant else None, log=_err)
+    est, metrics, regressions = run_method(data_dir, None, os.path.join(root, "run"), os.path.join(root, "report"),
+                                           baseline=_load_baseline(baseline) if os.path.isfile(baseline) else None,
+                                           overrides={"variant": args.variant} if args.variant else None, log=_err)
+    for line in est.info.get("warnings", []):
+        _err(f"warning: {line}")
     print(f"total {time.perf_counter() - t0:.1f} s, peak {_peak_rss_mib():.0f} MiB")
     return _report_exit(metrics, regressions, os.path.join(root, "report"))
 
