@@ -82,6 +82,9 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
             last[:] = [_fit(d, cls, fixed, known_sh, known_radiance, None, exponent_candidates, caster, prior)[0]]
             return last[0]
 
+        if config.pose_folds > len(data.views) and log:
+            log(f"pose refinement: pose_folds {config.pose_folds} exceeds the {len(data.views)} views; "
+                f"{len(data.views)} groups of one view each")
         data, poses = pose.refine_poses(data, held_out, rounds, min(config.pose_folds, len(data.views)), caster, log)
     pose_seconds = time.perf_counter() - t0
     est, prep, gains, solve_seconds = _fit(data, cls, config, known_sh, known_radiance, log, exponent_candidates,

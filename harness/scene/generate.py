@@ -238,6 +238,9 @@ def generate(spec: SceneSpec, out_dir: str, overwrite: bool = False, variant: st
         if spec.faults.active:
             mesh, views, test_cams, ldr, meta["faults"] = apply_faults(spec.faults, spec.seed, mesh, views, test_cams)
             say(f"faults applied to the {len(views)} training views: {spec.faults.summary()}")
+            for key, counts in meta["faults"].get("clamped", {}).items():
+                say(f"warning: faults.{key} = {counts['requested']} asks for more views than the {len(views)} training "
+                    f"views; applied to {counts['applied']} (recorded in transforms.json)")
         source = meta.get("faults", {}).pop("face_source", None)
         write_dataset(tmp, mesh, views, list(zip(test_cams, test)), meta, half=spec.render.half, ldr=ldr)
         truth = scene.ground_truth()

@@ -1238,3 +1238,9 @@ def test_the_demo_refuses_an_empty_path_a_foreign_folder_and_a_foreign_dataset(t
     expect_error(capsys, ["demo", "-o", out], "not earth-specular's", "scene 'micro' where the spec gives "
                  "'earth-specular'", "--overwrite", inputs=[out / "earth-specular" / "dataset"],
                  absent=[out / "earth-specular" / "run"])
+
+
+def test_a_fault_asking_for_more_views_than_there_are_is_said(tmp_path, capsys):
+    assert main(["generate", MICRO, "-o", str(tmp_path / "d"), "--set", "faults.glare_views=100"]) == 0
+    assert "faults.glare_views = 100 asks for more views than the 6 training views; applied to 6" in \
+        capsys.readouterr().err
