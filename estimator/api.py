@@ -124,6 +124,7 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     unaligned = [p["name"] for p in poses or [] if p["unaligned_rounds"]]
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
     small = [p["name"] for p in poses or [] if p.get("too_small")]
+    scale = _scale_shift(poses or [], data.views[0].camera.width)
     flat, repeated = data.mesh.degenerate_faces()
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + _mesh_warnings(
         flat, repeated) + _rowless_warnings(rowless, config.min_pixels) + _black_warnings(black) + (
@@ -137,6 +138,12 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
         f"pose refinement: {len(small)} view(s) show fewer than {pose.POSE_MIN_POINTS} pixels of estimated faces, "
         f"too few to align, and keep their poses ({_first(small)}; 'too_small' in 'poses'): the object is too small "
         "in them (bring the cameras closer or raise the resolution)"] if small else []) + ([
+        f"pose refinement moved the cameras {'closer to' if scale > 0 else 'farther from'} the object by a median "
+        f"{100 * abs(scale):.1f} % of their distance, all alike: the images show the object "
+        f"{'larger' if scale > 0 else 'smaller'} than the mesh under the given intrinsics, as a focal length "
+        f"{'shorter' if scale > 0 else 'longer'} than the camera's (or a mesh in other units) would; the refined "
+        "poses absorb it but fit the views less well: check fl_x, fl_y and the mesh's scale ('approach' in "
+        "'poses')"] if scale else []) + ([
         f"pose refinement: the last alignment of {len(undone)} view(s) moved their alpha outline more than "
         f"{pose.POSE_OUTLINE_TOLERANCE:g} px off the mesh's, and farther than before, so it was undone and they keep "
         f"their pose from before it ({_first(undone)}; 'outline_reverted' "
@@ -146,6 +153,21 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
         "'outline_px' in 'poses'): the refinement matched no pose to their silhouettes; check the intrinsics (focal "
         "length, principal point) and the mesh's scale against the images"] if off else [])
     return est
+
+
+def _scale_shift(poses: list[dict], width: int) -> float:
+    """The median share by which the pose refinement moved the views closer to the object
+    (:func:`pose.approach`, views not diverged), where the motion is a scale error rather than
+    noise (0.0 otherwise): the median lies more than 3 of its robust standard errors from 0
+    (1.2533 x 1.4826 x the median absolute deviation / sqrt(n), n >= 3 views), and it moves the
+    image's edge by more than half a pixel (share x width / 2 > 0.5): below that no view can
+    show it."""
+    shares = np.array([p["approach"] for p in poses if not p["diverged"] and "approach" in p])
+    if len(shares) < 3:
+        return 0.0
+    median = float(np.median(shares))
+    error = 1.2533 * 1.4826 * float(np.median(np.abs(shares - median))) / np.sqrt(len(shares))
+    return median if abs(median) > 3.0 * error and abs(median) * width / 2.0 > 0.5 else 0.0
 
 
 def _first(names: list[str]) -> str:

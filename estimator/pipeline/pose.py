@@ -404,6 +404,14 @@ def pose_change(before: Camera, after: Camera) -> dict:
             "translation": float(np.linalg.norm(after.center - before.center))}
 
 
+def approach(before: Camera, after: Camera, centre: np.ndarray) -> float:
+    """The share of its distance to ``centre`` (3,) by which the camera moved closer from
+    ``before`` to ``after`` (negative: farther). Every view of a capture moved alike is what a
+    wrong scale does (a focal length, or a mesh in other units), not what pose noise does."""
+    start = float(np.linalg.norm(before.center - centre))
+    return (start - float(np.linalg.norm(after.center - centre))) / max(start, 1e-300)
+
+
 def outline_offsets(data: MultiViewData, caster: RayCaster) -> np.ndarray:
     """(V,) how far, in pixels, each view's alpha outline lies from the mesh's outline under
     its camera: pixels where exactly one of (pixel centre sees the mesh, alpha >= 0.5) holds,
@@ -569,7 +577,8 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
         _log_round(log, data, views, reverted, r, rounds, settled)
         if settled:
             break
-    info = [{"name": v.name, **pose_change(v.camera, w.camera), "c2w": w.camera.c2w.tolist(), "diverged": bad,
+    info = [{"name": v.name, **pose_change(v.camera, w.camera), "approach": approach(v.camera, w.camera, centre),
+             "c2w": w.camera.c2w.tolist(), "diverged": bad,
              "unaligned_rounds": skipped, "outline_reverted": bool(undone),
              "outline_px": None if np.isnan(offset) else float(offset), **extra}
             for v, w, bad, skipped, undone, offset, extra
