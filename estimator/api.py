@@ -124,7 +124,7 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     unaligned = [p["name"] for p in poses or [] if p["unaligned_rounds"]]
     undone = [p["name"] for p in poses or [] if p["outline_reverted"]]
     small = [p["name"] for p in poses or [] if p.get("too_small")]
-    scale = _scale_shift(poses or [], data.views[0].camera.width)
+    scale = _scale_shift(poses or [], float(np.median([v.camera.width for v in data.views])))
     flat, repeated = data.mesh.degenerate_faces()
     est.info["warnings"] = est.info.get("method_warnings", []) + trust.warnings_for(est) + automatic + _mesh_warnings(
         flat, repeated) + _rowless_warnings(rowless, config.min_pixels) + _black_warnings(black) + (
@@ -155,15 +155,19 @@ def _estimate(data: MultiViewData, method: str | None, config: EstimatorConfig, 
     return est
 
 
-def _scale_shift(poses: list[dict], width: int) -> float:
+SCALE_MIN_VIEWS = 5   # views a scale motion is judged on at least: the MAD of fewer says little
+
+
+def _scale_shift(poses: list[dict], width: float) -> float:
     """The median share by which the pose refinement moved the views closer to the object
-    (:func:`pose.approach`, views not diverged), where the motion is a scale error rather than
-    noise (0.0 otherwise): the median lies more than 3 of its robust standard errors from 0
-    (1.2533 x 1.4826 x the median absolute deviation / sqrt(n), n >= 3 views), and it moves the
-    image's edge by more than half a pixel (share x width / 2 > 0.5): below that no view can
-    show it."""
-    shares = np.array([p["approach"] for p in poses if not p["diverged"] and "approach" in p])
-    if len(shares) < 3:
+    (:func:`pose.approach`), over the views it aligned (not diverged, not too small, never left
+    unaligned), where the motion is a scale error rather than noise (0.0 otherwise): at least
+    :data:`SCALE_MIN_VIEWS` views, the median more than 3 of its robust standard errors from 0
+    (1.2533 x 1.4826 x the median absolute deviation / sqrt(n)), and moving the image's edge by
+    more than half a pixel (share x ``width`` / 2 > 0.5): below that no view can show it."""
+    shares = np.array([p["approach"] for p in poses
+                       if not (p["diverged"] or p.get("too_small") or p["unaligned_rounds"])])
+    if len(shares) < SCALE_MIN_VIEWS:
         return 0.0
     median = float(np.median(shares))
     error = 1.2533 * 1.4826 * float(np.median(np.abs(shares - median))) / np.sqrt(len(shares))

@@ -281,7 +281,8 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     _add_neighbour_shares(views, prep)
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, residual, estimated, outlier, est.labels[obs.face]))
+        sigma = noise_level(_fitted_columns(prep, est, shade), residual, estimated, est.labels[obs.face])
+        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, outlier, sigma))
         rel_se = np.linalg.norm(albedo_se, axis=1) / np.linalg.norm(est.diffuse + est.specular, axis=1)
     counts = np.bincount(obs.face, minlength=f)
     good = est.observed & np.isfinite(rel_se)
@@ -306,43 +307,71 @@ def _outliers(relative: np.ndarray, estimated: np.ndarray) -> tuple[float, np.nd
     return scale, relative > OUTLIER_SIGMAS * max(scale, MIN_OUTLIER_SCALE)
 
 
-def _precision(face: np.ndarray, num_faces: int, rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray,
-               outlier: np.ndarray, group: np.ndarray) -> np.ndarray:
+def _precision(face: np.ndarray, num_faces: int, rows: np.ndarray, outlier: np.ndarray,
+               sigma: np.ndarray) -> np.ndarray:
     """(F, 3) precision of a per-face albedo with the light fixed: sum over its inlier rows of
-    rows^2 (rows (N, 3): the albedo's coefficient in each observation) / sigma^2, sigma the
-    noise level of the residuals (N, 3) per channel (:func:`noise_level`, ``group`` (N,) the
-    albedo each row's face takes); 0 where a face has no row."""
-    sigma = noise_level(rows, residual, estimated, group)
+    rows^2 (rows (N, 3): the albedo's coefficient in each observation) / sigma^2, ``sigma`` (3,)
+    the noise level per channel (:func:`noise_level`); 0 where a face has no row."""
     info = np.stack([np.bincount(face, rows[:, k] ** 2 * ~outlier, minlength=num_faces) for k in range(3)], 1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.nan_to_num(info / np.maximum(sigma, 1e-300)[None] ** 2)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return np.nan_to_num(info / np.maximum(sigma ** 2, 1e-300)[None])
 
 
-def noise_level(rows: np.ndarray, residual: np.ndarray, estimated: np.ndarray, group: np.ndarray) -> np.ndarray:
+def noise_level(columns: list[np.ndarray], residual: np.ndarray, estimated: np.ndarray,
+                group: np.ndarray) -> np.ndarray:
     """(3,) robust noise level per channel: 1.4826 x the median absolute residual (N, 3) of the
     ``estimated`` rows (N,) bool, each divided by sqrt(1 - h), h its leverage in the fit of its
-    group's albedo (``group`` (N,): one albedo per channel; h = row^2 over the sum of its
-    group's rows^2, ``rows`` (N, 3)). A fit of one albedo from n equal rows leaves residuals of
-    variance sigma^2 (1 - 1/n): the only row of its group is interpolated (h = 1, residual 0
-    whatever the noise) and says nothing of the noise, so it is left out: a mesh seen once per
-    face would otherwise claim a noise of 0 and its faces' albedos exact beside faces seen
-    more often. Where no group has two rows (an exact fit, which the run warns is
-    underdetermined), the residuals as they are; infinite without an estimated row."""
+    group's albedos (``group`` (N,)): per channel, one albedo per column of ``columns`` (one or
+    two (N, 3) arrays: the diffuse shading, the specular gloss or both), h = x^T (sum over the
+    group of x x^T)^-1 x for the row's coefficients x. A fit of p albedos from n rows leaves
+    residuals of variance sigma^2 (1 - h), summing to (n - p) sigma^2: a row a fit interpolates
+    (h = 1, residual 0 whatever the noise) says nothing of the noise and is left out, so a mesh
+    seen once per face does not claim a noise of 0 and its faces' albedos exact beside faces
+    seen more often. Where every row is interpolated (an exact fit, which the run warns is
+    underdetermined), the residuals as they are, near 0: that fit's errors are unknown.
+    Infinite without an estimated row."""
     index = np.nonzero(estimated)[0]
     if not len(index):
         return np.full(3, np.inf)
     _, inverse = np.unique(group[index], return_inverse=True)
+
+    def summed(values):   # over each row's group, back on its rows
+        return np.bincount(inverse, values)[inverse]
+
     sigma = np.full(3, np.inf)
     for k in range(3):
-        square = rows[index, k] ** 2
-        total = np.bincount(inverse, square)[inverse]
+        x = [c[index, k] for c in columns]
         with np.errstate(divide="ignore", invalid="ignore"):
-            leverage = np.where(total > 0, square / total, 0.0)
+            if len(x) == 1:
+                leverage = x[0] ** 2 / summed(x[0] ** 2)
+            else:
+                a, b, c = summed(x[0] ** 2), summed(x[0] * x[1]), summed(x[1] ** 2)
+                det = a * c - b * b
+                whole = det > 1e-12 * a * c   # otherwise the columns are collinear in the group, or one is 0
+                leverage = np.where(whole, (c * x[0] ** 2 - 2 * b * x[0] * x[1] + a * x[1] ** 2) / det,
+                                    (x[0] ** 2 + x[1] ** 2) / (a + c))
+        leverage = np.nan_to_num(leverage)
         free = leverage < 1.0 - 1e-9
         if not free.any():
             free, leverage = np.ones(len(index), bool), np.zeros(len(index))
         sigma[k] = 1.4826 * np.median(np.abs(residual[index[free], k]) / np.sqrt(1.0 - leverage[free]))
     return sigma
+
+
+def _fitted_columns(prep: Prepared, est: Estimate, shade: np.ndarray) -> list[np.ndarray]:
+    """The coefficients (N, 3) of the albedos each row's group fits: the diffuse shading
+    ``shade``, the specular gloss, or both (``est.config.components``). A method whose free
+    faces share one specular (``info['own_specular_groups']``: the labels below it fit their
+    own) gives those rows no specular column: one unknown over all of them moves no row's fit."""
+    components = est.config.components
+    columns = [] if components == "specular" else [shade]
+    if components != "diffuse":
+        gloss = prep.gloss(est.light)
+        own = est.info.get("own_specular_groups")
+        if own is not None and components == "both":
+            gloss = gloss * (est.labels[prep.obs.face] < own)[:, None]
+        columns.append(gloss)
+    return columns
 
 
 def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
@@ -352,9 +381,9 @@ def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndar
     estimated = est.observed[prep.obs.face]
     _, outlier = _outliers(relative, estimated)
     face, f = prep.obs.face, prep.obs.num_faces
-    group = est.labels[face]
-    return (_precision(face, f, shade, residual, estimated, outlier, group),
-            _precision(face, f, prep.gloss(est.light), residual, estimated, outlier, group))
+    sigma = noise_level(_fitted_columns(prep, est, shade), residual, estimated, est.labels[face])
+    return (_precision(face, f, shade, outlier, sigma),
+            _precision(face, f, prep.gloss(est.light), outlier, sigma))
 
 
 def _finite_or_none(value: float) -> float | None:

@@ -334,9 +334,10 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     blind = [views[index].name for index in empty if not usable[index].any()]
     if blind:
         raise InputError(f"{len(blind)} camera(s) see none of the mesh: {', '.join(blind[:5])}"
-                         f"{' ...' if len(blind) > 5 else ''}: under their poses the mesh covers none of the pixels "
-                         "their alpha gives the object; check their poses (an object only a few pixels across is too "
-                         "small for the pose refinement to align) or drop them from the dataset")
+                         f"{' ...' if len(blind) > 5 else ''}: under their poses no pixel centre that can observe the "
+                         "mesh hits it (outside the frame, or off the object their alpha covers); check their poses "
+                         "(an object only a few pixels across is too small for the pose refinement to align) or drop "
+                         "them from the dataset")
     # the other empty views show the mesh, but no face covers min_pixels of their pixels whole (a
     # camera far from the object among nearer ones): named in rowless_views, not refused
     if len(black) + len(empty) == len(views):

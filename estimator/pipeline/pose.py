@@ -513,10 +513,13 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
     -------
     data : the data with the refined cameras.
     info : one dict per view: 'name', 'rotation_deg' and 'translation' (world units) of the
-        correction, 'c2w' (4x4 list), 'diverged' (bool), 'unaligned_rounds' (int),
+        correction, 'approach' (:func:`approach`: the share of its distance the camera moved
+        closer to the object), 'c2w' (4x4 list), 'diverged' (bool), 'unaligned_rounds' (int),
         'outline_reverted' (bool: the last round's alignment was undone by the outline
         check, the view keeping its pose from before that round), 'outline_px' (the final
-        pose's outline offset, None without alpha), 'pixels' and 'cost' of the last alignment.
+        pose's outline offset, None without alpha), 'pixels' and 'cost' of the last alignment,
+        and 'too_small' (bool: too few of its pixels show estimated faces to align it,
+        :data:`POSE_MIN_POINTS`).
     """
     n = len(data.views)
     if n < 2:
@@ -538,7 +541,7 @@ def refine_poses(data: MultiViewData, solve: Callable[[MultiViewData, Estimate |
     views, diverged = list(centred), [False] * n
     offsets = outline_offsets(dataclasses.replace(data, views=centred), caster)   # NaN without alpha
     reverted = np.zeros(n, dtype=bool)
-    last = [{"pixels": 0, "cost": [0.0, 0.0]}] * n
+    last = [{"pixels": 0, "cost": [0.0, 0.0], "too_small": False}] * n   # the silhouette step alone: none aligned
     if n - -(-n // folds) < POSE_MIN_VIEWS:
         rounds = 0
         if log:

@@ -21,7 +21,7 @@ import numpy as np
 
 from estimator import VARIANTS, InputError, StopRequested, clear_stop, request_stop, stop_signals_handled
 from harness.cli.heap import keep_freed_memory
-from harness.io.atomic import OutputError, check_output, refuse_inputs, writable
+from harness.io.atomic import MARKER, OutputError, check_output, output_kind, refuse_inputs, writable
 from harness.io.jsonio import load_json
 from harness.scene.spec import SCENES_DIR, load_spec, resolve_scene, shipped_scenes
 from harness.sweep.executor import EXECUTORS
@@ -341,9 +341,9 @@ def cmd_demo(args) -> int:
 
     if not str(args.output).strip():   # an empty -o would resolve to the working directory
         raise OutputError("the output path is empty; give -o a folder")
-    if os.path.isdir(args.output) and set(os.listdir(args.output)) - {DEFAULT_SCENE}:
-        raise OutputError(f"refusing to write the demo into {os.path.abspath(args.output)}: it holds other files "
-                          f"than the demo's {DEFAULT_SCENE}/ (a dataset, a run, your own); choose another -o")
+    if os.path.exists(os.path.join(args.output, MARKER)):
+        raise OutputError(f"refusing to write the demo into {os.path.abspath(args.output)}: it is itself "
+                          f"pseudolight output ({output_kind(args.output) or 'of unknown kind'}); choose another -o")
     root = os.path.join(args.output, DEFAULT_SCENE)
     data_dir = os.path.join(root, "dataset")
     check_output(os.path.join(root, "run"), [SCENES_DIR], True, kind="run")

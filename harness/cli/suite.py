@@ -42,7 +42,7 @@ def _rendered_otherwise(data_dir: str, spec) -> str:
         return f"its transforms.json cannot be read: {exc}"
     cams = spec.cameras
     expected = {"scene": spec.name, "seed": spec.seed, "spp": spec.render.spp, "w": cams.width, "h": cams.height,
-                "views": cams.count, "test views": cams.test_count, "faults": None}
+                "views": cams.count, "test views": cams.test_count, "faults": "faults" if spec.faults.active else None}
     found = {"scene": meta.get("scene"), "seed": meta.get("seed"), "spp": meta.get("spp"), "w": meta.get("w"),
              "h": meta.get("h"), "views": len(meta.get("frames", [])), "test views": len(meta.get("test_frames", [])),
              "faults": "faults" if meta.get("faults") else None}

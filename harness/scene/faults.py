@@ -106,7 +106,7 @@ def decimate(mesh: TriangleMesh, keep: float, steps: int = 24) -> TriangleMesh:
     target = max(4, int(round(keep * len(f))))
     extent = float(np.ptp(v, axis=0).max())
 
-    def cluster(cell: float) -> TriangleMesh:
+    def cluster(cell: float) -> TriangleMesh | None:
         keys = np.floor((v - v.min(axis=0)) / cell).astype(np.int64)
         _, ids = np.unique(keys, axis=0, return_inverse=True)
         ids = ids.ravel()

@@ -77,8 +77,9 @@ def build_materials(mesh: TriangleMesh, spec: SceneSpec, uv: np.ndarray | None =
         for index, region in enumerate(m.regions):
             if region.albedo is not None:
                 inside = labels == index
-                textured = _albedo(mesh, uv, region.albedo, f"material.regions[{index}].albedo", spec.seed + index)
-                diffuse[inside] = textured[inside]
+                where = f"material.regions[{index}].albedo"
+                textured = _albedo_values(mesh, uv, region.albedo, where, spec.seed + index)
+                diffuse[inside] = reflectance(where, textured[inside])
         return diffuse, specular, labels
     return (_albedo(mesh, uv, m.diffuse, "material.diffuse", spec.seed),
             _albedo(mesh, uv, m.specular, "material.specular", spec.seed), None)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import time
 
 from tqdm import tqdm
@@ -82,19 +83,18 @@ def claim_sweep_folder(out_dir: str, suite_name: str) -> bool:
     """Make ``out_dir`` the sweep folder of suite ``suite_name``, or refuse it: it must be new,
     empty, or that suite's sweep folder already (it holds :data:`SWEEP_MARKER`, which names the
     suite): a folder of the user's is never written into, and another suite's comparison is not
-    replaced. Returns whether the folder was made (or empty) here: an interrupted first run
-    removes it again (:func:`release_sweep_folder`)."""
+    replaced. Returns whether the folder was made here (it did not exist): an interrupted first
+    run removes it again (:func:`release_sweep_folder`)."""
     root = os.path.abspath(out_dir)
     marker = os.path.join(root, SWEEP_MARKER)
     made = not os.path.lexists(root)
     if not made:
         if not os.path.isdir(root) or os.path.islink(root):
             raise OutputError(f"sweep output {root} exists and is not a folder")
-        made = not os.listdir(root)
-        if not made and not os.path.exists(marker):
+        if os.listdir(root) and not os.path.exists(marker):
             raise OutputError(f"refusing to write the sweep into {root}: it is not empty and was not made by "
                               f"pseudolight bench (no {SWEEP_MARKER}); choose another -o")
-        if not made:
+        if os.path.exists(marker):
             with open(marker) as f:
                 named = [line[len("suite: "):].strip() for line in f if line.startswith("suite: ")]
             if named and named[0] != suite_name:
@@ -110,13 +110,14 @@ def claim_sweep_folder(out_dir: str, suite_name: str) -> bool:
 
 
 def release_sweep_folder(out_dir: str) -> None:
-    """Remove a sweep folder that holds nothing but its marker (a first run stopped before any
-    job finished), so that an interrupted sweep leaves no folder behind."""
+    """Remove a sweep folder that holds no file but its marker (a first run stopped before any
+    job finished: the jobs' own folders are written atomically, so what an interrupted one
+    leaves is empty folders), so that an interrupted sweep leaves no folder behind."""
     root = os.path.abspath(out_dir)
     try:
-        if os.listdir(root) == [SWEEP_MARKER]:
-            os.remove(os.path.join(root, SWEEP_MARKER))
-            os.rmdir(root)
+        files = [name for _, _, names in os.walk(root) for name in names]
+        if files == [SWEEP_MARKER]:
+            shutil.rmtree(root)
     except OSError:
         pass
 

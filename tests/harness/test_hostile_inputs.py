@@ -1223,15 +1223,16 @@ def test_test_frames_that_are_no_list_are_refused_before_the_estimate(copy, tmp_
                  absent=[tmp_path / "r"])
 
 
-def test_the_demo_refuses_an_empty_path_a_foreign_folder_and_a_foreign_dataset(tmp_path, capsys):
-    """Checked before anything renders: an empty -o (the working directory), a folder holding
-    other files than the demo's, and a dataset in the demo's place that the demo's spec did not
-    render (here the micro scene), which would otherwise be reported as the demo."""
+def test_the_demo_refuses_an_empty_path_pseudolight_output_and_a_foreign_dataset(tmp_path, capsys):
+    """Checked before anything renders: an empty -o (the working directory), a folder that is
+    itself pseudolight output (a dataset), and a dataset in the demo's place that the demo's
+    spec did not render (here the micro scene), which would otherwise be reported as the demo."""
     expect_error(capsys, ["demo", "-o", ""], "output path is empty")
-    mine = tmp_path / "mine"
-    mine.mkdir()
-    (mine / "notes.txt").write_text("mine")
-    expect_error(capsys, ["demo", "-o", mine], "holds other files", inputs=[mine])
+    ds = tmp_path / "ds"
+    assert main(["generate", MICRO, "-o", str(ds)]) == 0
+    capsys.readouterr()
+    expect_error(capsys, ["demo", "-o", ds], "itself pseudolight output (dataset)", inputs=[ds],
+                 absent=[ds / "earth-specular"])
     out = tmp_path / "out"
     assert main(["generate", MICRO, "-o", str(out / "earth-specular" / "dataset")]) == 0
     capsys.readouterr()

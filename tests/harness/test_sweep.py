@@ -302,7 +302,8 @@ def test_a_port_that_does_not_speak_dask_is_refused_not_waited_on(silent_listene
 def test_a_sweep_folder_is_claimed_by_its_suite_and_released_when_nothing_finished(tmp_path):
     """The marker names the suite: the same suite may resume in its folder, another is refused
     (it would replace the first's comparison); a first run stopped before any job finished
-    leaves no folder, a folder that holds jobs is kept."""
+    (empty folders at most) leaves no folder, a folder that holds a job's file is kept, and a
+    folder the user made is not counted as made by the sweep."""
     from harness.io.atomic import OutputError
     from harness.sweep.runner import SWEEP_MARKER, claim_sweep_folder, release_sweep_folder
 
@@ -311,12 +312,17 @@ def test_a_sweep_folder_is_claimed_by_its_suite_and_released_when_nothing_finish
     assert claim_sweep_folder(str(out), "first") is False                 # resumed
     with pytest.raises(OutputError, match="holds the sweep of suite 'first'"):
         claim_sweep_folder(str(out), "second")
+    (out / "datasets").mkdir()             # what an interrupted first job leaves: an empty folder
     release_sweep_folder(str(out))
     assert not out.exists()
     claim_sweep_folder(str(out), "first")
-    (out / "datasets").mkdir()
+    (out / "datasets" / "job").mkdir(parents=True)
+    (out / "datasets" / "job" / "job.json").write_text("{}")
     release_sweep_folder(str(out))
     assert sorted(p.name for p in out.iterdir()) == [SWEEP_MARKER, "datasets"]
+    empty = tmp_path / "empty"
+    empty.mkdir()                          # the user's own empty folder is not removed
+    assert claim_sweep_folder(str(empty), "first") is False
 
 
 def test_bench_never_writes_into_a_folder_of_the_users(tmp_path, capsys):

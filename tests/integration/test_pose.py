@@ -475,3 +475,25 @@ def test_a_focal_length_a_tenth_long_is_named_though_the_poses_absorb_it(tiny_ea
     jitter = dataclasses.replace(data, views=jittered(data.views, 0.5, 0.02, seed=2))
     noisy = estimate(jitter, "bilinear-per-face", dataclasses.replace(EARTH, pose_rounds=1))
     assert not any("all alike" in w for w in noisy.info["warnings"])
+
+
+def test_a_scale_motion_is_named_only_when_it_is_significant_visible_and_seen_by_enough_views():
+    """On made-up poses: 16 views moved 5 % closer (+-0.5 %) is a scale error (the sign gives
+    'closer'); the same motion 0.5 % at 64 px moves the edge by 0.16 px and is not; noise about
+    0 is not; four views are too few; diverged, too small or unaligned views are not counted."""
+    from estimator.api import _scale_shift
+
+    rng = np.random.default_rng(0)
+
+    def poses(shares, **flags):
+        return [{"approach": float(a), "diverged": False, "too_small": False, "unaligned_rounds": 0, **flags}
+                for a in shares]
+
+    closer = 0.05 + 0.005 * rng.normal(size=16)
+    assert 0.045 < _scale_shift(poses(closer), 256) < 0.055
+    assert _scale_shift(poses(0.1 * closer), 64) == 0.0               # 0.5 % x 32 px = 0.16 px
+    assert _scale_shift(poses(0.01 * rng.normal(size=16)), 256) == 0.0
+    assert _scale_shift(poses(closer[:4]), 256) == 0.0
+    assert _scale_shift(poses(closer, diverged=True) + poses(0.01 * rng.normal(size=8)), 256) == 0.0
+    assert _scale_shift(poses(closer, too_small=True), 256) == 0.0
+    assert _scale_shift(poses(closer, unaligned_rounds=1), 256) == 0.0

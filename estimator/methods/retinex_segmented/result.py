@@ -56,6 +56,8 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     info = {"clusters": int(len(np.unique(group[observed]))), "uniform_regions": regions,
             "uniform_share": h.share, "residuals": result.residuals, "lm_residuals": result.lm_residuals,
             "sun": sun_info, "light_from": h.source.value, "region_deviation": h.deviation, "region_drift": h.drift,
+            # the groups (labels) below this fit a specular of their own; the free faces share one
+            "own_specular_groups": regions,
             "reflection_explained": (fits.coat_map.explained.tolist() if fits.coat_map is not None
                                      and fits.coat_map.determined else None),
             "lobe_explained": None if fits.lobe is None else fits.lobe[0].explained.tolist(),
