@@ -2,12 +2,14 @@
 diagnostics."""
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import replace
 
 import numpy as np
 
 from .config import EstimatorConfig
+from .core import sh
 from .core.blas import limited_blas
 from .core.data import MultiViewData
 from .core.errors import InputError
@@ -50,7 +52,22 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     The whole estimate runs with BLAS limited to ``config.blas_threads`` threads
     (:mod:`estimator.core.blas`).
     """
-    config = config or EstimatorConfig()
+    config = EstimatorConfig() if config is None else config
+    if not isinstance(config, EstimatorConfig):
+        raise InputError(f"config must be an EstimatorConfig, got {type(config).__name__}")
+    config.__post_init__()   # a field assigned after the config was made is checked as at its making
+    if log is not None and not callable(log):
+        raise InputError(f"log must be a callable taking one line, got {type(log).__name__}")
+    for name, light in (("known_sh", known_sh), ("known_radiance", known_radiance)):
+        if light is not None:
+            shape = np.shape(light)
+            if len(shape) != 2 or shape[1] != 3:
+                raise InputError(f"{name} must be ((L + 1)^2, 3) SH coefficients per channel, got {shape}")
+            sh.order_of(shape[0])
+    if exponent_candidates is not None and not (
+            len(exponent_candidates) and all(isinstance(n, numbers.Real) and not isinstance(n, bool)
+                                             and np.isfinite(n) and n > 0 for n in exponent_candidates)):
+        raise InputError(f"exponent_candidates must be Phong exponents > 0, at least one, got {exponent_candidates!r}")
     with limited_blas(config.blas_threads):
         return _estimate(data, method, config, known_sh, known_radiance, log, exponent_candidates, caster)
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from estimator import (
     EstimatorConfig,
+    InputError,
     RayCaster,
     SphereSampling,
     TriangleMesh,
@@ -107,6 +108,11 @@ def evaluation_mask(truth: GroundTruth, irradiance: np.ndarray, observed: np.nda
     percentile (faces unlit in every view carry no information); ``irradiance`` (F, 3) is
     :func:`true_irradiance`.
     """
+    if component not in ("diffuse", "specular"):
+        raise InputError(f"component must be 'diffuse' or 'specular', got {component!r}")
+    observed = np.asarray(observed)
+    if observed.dtype != bool or observed.shape != (len(truth.diffuse),):
+        raise InputError(f"observed must be ({len(truth.diffuse)},) bool, got {observed.shape} {observed.dtype}")
     albedo = (truth.diffuse if component == "diffuse" else truth.specular) @ LUMINANCE
     big = albedo > min_albedo * max(np.percentile(albedo, 99), 1e-300)
     return observed & big & lit_faces(irradiance, min_light)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import comb
 
-from estimator import psnr_db, sh
+from estimator import InputError, psnr_db, sh
 
 
 def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
@@ -63,6 +63,25 @@ def lstsq_scale(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
 
 
+def _compared(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The masked rows of ``estimate`` and ``truth`` (F, 3) as float arrays, refusing what would
+    score wrongly without a word: shapes that differ, a mask that is not (F,) bool (0/1
+    integers would index faces 0 and 1), and estimated albedos that are non-finite or negative
+    (no surface reflects so, and a negative channel would take a negative gauge that makes
+    a negated estimate perfect)."""
+    e, t, m = np.asarray(estimate, float), np.asarray(truth, float), np.asarray(mask)
+    if e.shape != t.shape or e.ndim != 2:
+        raise InputError(f"estimate and truth must be albedos of one shape (F, C), got {e.shape} and {t.shape}")
+    if m.dtype != bool or m.shape != (len(e),):
+        raise InputError(f"mask must be ({len(e)},) bool, got {m.shape} {m.dtype}")
+    e, t = e[m], t[m]
+    bad = ~np.all(np.isfinite(e), axis=1) | np.any(e < 0, axis=1)
+    if bad.any():
+        raise InputError(f"{int(bad.sum())} compared face(s) have a non-finite or negative estimated albedo (first: "
+                         f"row {int(np.nonzero(m)[0][np.argmax(bad)])}); mark them unestimated before scoring")
+    return e, t
+
+
 def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, scale: str,
                   dc: np.ndarray | None = None) -> np.ndarray:
     """Per-face ratio estimated / true albedo, after removing one global scale.
@@ -83,7 +102,9 @@ def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, sca
     -------
     (n, 4) ratios per channel R, G, B and of the luminance, for the n masked faces.
     """
-    e, t = np.asarray(estimate, float)[mask], np.asarray(truth, float)[mask]
+    if scale not in SCALES:
+        raise InputError(f"scale must be one of {SCALES}, got {scale!r}")
+    e, t = _compared(estimate, truth, mask)
     if scale == "dc":
         if dc is None:
             raise ValueError("scale 'dc' needs the DC coefficient of the true illumination")
@@ -104,7 +125,9 @@ def albedo_psnr(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, gauge
     """PSNR (dB, peak 1) of per-face albedo (F, 3) over every masked face after a per-channel
     scale of the estimate onto the truth (the albedo/light gauge): 'lstsq' (:func:`lstsq_scale`)
     or 'robust' (:func:`robust_scale`: only the scale ignores the gross errors)."""
-    e, t = np.asarray(estimate, float)[mask], np.asarray(truth, float)[mask]
+    if gauge not in ("lstsq", "robust"):
+        raise InputError(f"gauge must be 'lstsq' or 'robust', got {gauge!r}")
+    e, t = _compared(estimate, truth, mask)
     if e.size == 0:
         return None
     scale = lstsq_scale(e, t) if gauge == "lstsq" else robust_scale(e, t)[0]
@@ -127,7 +150,9 @@ def sh_comparison(estimate: np.ndarray, truth: np.ndarray) -> dict:
     """Relative L2 error and per-band energy of two SH sets ((L + 1)^2, C), same gauge."""
     e, t = np.asarray(estimate, float), np.asarray(truth, float)
     if e.shape != t.shape:
-        raise ValueError(f"SH shapes differ: {e.shape} vs {t.shape}")
+        raise InputError(f"SH shapes differ: {e.shape} vs {t.shape}")
+    if not np.any(t):
+        raise InputError("the true SH light is zero: no relative error is defined")
     order = sh.order_of(e.shape[0])
     band = sh.degrees(order)
     energy = lambda c: [float(np.sum(c[band == l] ** 2)) for l in range(order + 1)]  # noqa: E731
@@ -238,9 +263,14 @@ def irradiance_error(estimate_radiance: np.ndarray, true_radiance: np.ndarray) -
     kernel = np.pi * sh.expand_per_degree(sh.phong_filter(order, 1.0))[:, None]
     basis = sh.basis(order, sh.fibonacci_sphere(IRRADIANCE_NORMALS))
     m = sh.num_coeffs(order)
-    padded = np.zeros((m, 3))   # an estimate of a lower order has zeros above it
-    padded[: min(m, len(estimate_radiance))] = estimate_radiance[:m]
-    e, t = basis @ (kernel * padded), basis @ (kernel * true_radiance[:m])
+    def padded(radiance):   # a light of a lower order has zeros above it
+        out = np.zeros((m, 3))
+        out[: min(m, len(radiance))] = np.asarray(radiance, float)[:m]
+        return out
+
+    e, t = basis @ (kernel * padded(estimate_radiance)), basis @ (kernel * padded(true_radiance))
+    if not np.any(t):
+        raise InputError("the true light gives no irradiance: no relative error is defined")
     return float(np.linalg.norm(_scaled(e, t) - t) / max(np.linalg.norm(t), 1e-300))
 
 
@@ -254,6 +284,8 @@ def latlong_psnr(estimate: np.ndarray, truth: np.ndarray) -> float:
     weights = latlong.solid_angles(h, w).reshape(-1)
     e = sh.to_latlong(estimate, h, w).reshape(-1, 3)
     t = sh.to_latlong(truth, h, w).reshape(-1, 3)
+    if not t.max() > 0:
+        raise InputError("the true light's lat-long map has no positive value: no PSNR is defined")
     mse = float(np.sum(weights[:, None] * (_scaled(e, t, weights) - t) ** 2) / (3 * weights.sum()))
     return psnr_db(mse, float(t.max()))
 

@@ -53,7 +53,12 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 1.0, 0.0
     When ``up`` is parallel to the view direction, world +Z (or +X) is used instead.
     """
     eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    if eye.shape != (3,) or target.shape != (3,) or up.shape != (3,) \
+            or not all(np.all(np.isfinite(v)) for v in (eye, target, up)):
+        raise InputError(f"look_at needs finite 3-vectors, got eye {eye.shape}, target {target.shape}, up {up.shape}")
     forward = target - eye
+    if not np.linalg.norm(forward) > 0:
+        raise InputError(f"look_at: the eye and the target are one point {eye.tolist()}: no view direction")
     forward /= np.linalg.norm(forward)
     for candidate in (up, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])):
         right = np.cross(forward, candidate)
@@ -100,6 +105,14 @@ class Camera:
                 or np.dot(rot[0], np.cross(rot[1], rot[2])) < 0:
             raise InputError("camera c2w is not a rigid camera-to-world transform (its rotation part must be "
                              "orthonormal with determinant +1 and its last row 0 0 0 1)")
+        for name in ("width", "height"):   # pixel counts: 40.0 or True would fail deep in a render
+            value = getattr(self, name)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+                raise InputError(f"camera {name} must be an integer number of pixels, got {value!r}")
+        for name in ("fx", "fy", "cx", "cy"):
+            value = getattr(self, name)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise InputError(f"camera {name} must be a number, got {value!r}")
         values = (self.fx, self.fy, self.cx, self.cy, self.width, self.height)
         if not all(np.isfinite(v) for v in values):
             raise InputError(f"camera intrinsics must be finite, got fx={self.fx}, fy={self.fy}, "
@@ -112,7 +125,8 @@ class Camera:
     @classmethod
     def from_fov(cls, c2w: np.ndarray, fov_x_deg: float, width: int, height: int) -> "Camera":
         """Square-pixel camera with the principal point at the image centre."""
-        if not 0.0 < fov_x_deg < 180.0:
+        if isinstance(fov_x_deg, (bool, np.bool_)) or not isinstance(fov_x_deg, (int, float, np.integer, np.floating)) \
+                or not 0.0 < fov_x_deg < 180.0:
             raise InputError(f"fov_x must lie in (0, 180) degrees, got {fov_x_deg}")
         f = 0.5 * width / np.tan(0.5 * np.radians(fov_x_deg))
         return cls(c2w, f, f, 0.5 * width, 0.5 * height, int(width), int(height))

@@ -226,5 +226,16 @@ class MultiViewData:
     test_views: list[View] = field(default_factory=list)
 
     def __post_init__(self):
+        if not isinstance(self.mesh, TriangleMesh):
+            raise InputError(f"MultiViewData.mesh must be a TriangleMesh, got {type(self.mesh).__name__}")
+        for name in ("views", "test_views"):
+            views = getattr(self, name)
+            if not isinstance(views, (list, tuple)) or not all(isinstance(v, View) for v in views):
+                raise InputError(f"MultiViewData.{name} must be a list of View, got {type(views).__name__}")
         if len(self.views) == 0:
             raise InputError("the dataset has no frames (training views)")
+        # a view's name keys its per-view results (outline offsets, gains, poses): two alike would merge
+        names = [v.name for v in self.views]
+        if len(set(names)) != len(names):
+            twice = sorted({n for n in names if names.count(n) > 1})
+            raise InputError(f"training views must have distinct names; repeated: {', '.join(map(repr, twice[:5]))}")

@@ -9,7 +9,10 @@ reader may be handed the whole configuration.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields
+
+import numpy as np
 
 from .errors import InputError
 
@@ -40,10 +43,13 @@ class Section:
                 ok = value is None or isinstance(value, str)
             elif isinstance(default, bool):
                 ok = isinstance(value, bool)
-            elif isinstance(default, int):
-                ok = isinstance(value, int) and not isinstance(value, bool)
+            elif isinstance(default, int):   # numpy's integers too, held as int
+                ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+                if ok:
+                    object.__setattr__(self, f.name, int(value))
             elif isinstance(default, float):
-                ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+                ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) \
+                    and math.isfinite(value)
                 if ok:
                     object.__setattr__(self, f.name, float(value))
             else:

@@ -28,9 +28,15 @@ from .errors import InputError
 
 def num_coeffs(order: int) -> int:
     """Number of coefficients of an order-``order`` expansion: (L + 1)^2."""
-    if order < 0:
-        raise InputError(f"SH order must be >= 0, got {order}")
-    return (order + 1) ** 2
+    return (_order(order) + 1) ** 2
+
+
+def _order(order) -> int:
+    """``order`` as an int, refused unless it is a whole number >= 0 (2.5 or True is no order)."""
+    if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer, float, np.floating)) \
+            or not float(order).is_integer() or order < 0:
+        raise InputError(f"SH order must be a whole number >= 0, got {order!r}")
+    return int(order)
 
 
 def order_of(count: int) -> int:
@@ -42,7 +48,10 @@ def order_of(count: int) -> int:
 
 
 def index(l: int, m: int) -> int:
-    """Flat index l (l + 1) + m of coefficient (l, m)."""
+    """Flat index l (l + 1) + m of coefficient (l, m), |m| <= l (past it, the index is another
+    coefficient's: (1, 5) would be (2, 1))."""
+    if not 0 <= abs(m) <= l:
+        raise InputError(f"SH coefficient (l, m) needs |m| <= l, got ({l}, {m})")
     return l * (l + 1) + m
 
 
@@ -105,6 +114,12 @@ def _directions(dirs: np.ndarray) -> np.ndarray:
     d = np.asarray(dirs, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] != 3:
         raise InputError(f"dirs must have shape (N, 3), got {d.shape}")
+    # the basis is a polynomial of degree l in the direction: a vector of length r scales its
+    # degree-l terms by r^l, so a direction that is not unit gives a wrong value, not an error
+    length = np.einsum("ij,ij->i", d, d)
+    if np.any(np.abs(length - 1.0) > 1e-5):
+        worst = int(np.argmax(np.abs(length - 1.0)))
+        raise InputError(f"dirs must be unit vectors: row {worst} has length {np.sqrt(length[worst]):.6g}")
     return d
 
 

@@ -73,7 +73,8 @@ class RayCaster:
         self.shadow_functions: dict[bytes, object] = {}
 
     def _rays(self, origins: np.ndarray, directions: np.ndarray, tmax: float | None = None):
-        """An ``mi.Ray3f`` of N rays from origins and directions (N, 3)."""
+        """An ``mi.Ray3f`` of N rays from origins and directions (N, 3) (checked by
+        :func:`_check_rays`)."""
         mi = self.mi
         o = mi.Point3f(*(np.ascontiguousarray(origins[:, i], dtype=np.float32) for i in range(3)))
         d = mi.Vector3f(*(np.ascontiguousarray(directions[:, i], dtype=np.float32) for i in range(3)))
@@ -115,6 +116,7 @@ class RayCaster:
         -------
         (N,) int64
         """
+        _check_rays(origins, directions)
         if len(origins) == 0:
             return np.zeros(0, dtype=np.int64)
         return self._first_hits(self._rays(origins, directions))
@@ -123,6 +125,7 @@ class RayCaster:
         """(N,) bool: each ray (origins, directions (N, 3)) hits nothing (a shadow ray that
         escapes). Mitsuba's ``ray_test`` stops at any hit, about half the time of
         :meth:`first_hit_faces`, which finds the first."""
+        _check_rays(origins, directions)
         if len(origins) == 0:
             return np.zeros(0, dtype=bool)
         return ~np.asarray(self.scene.ray_test(self._rays(origins, directions)), dtype=bool)
@@ -187,6 +190,8 @@ class RayCaster:
         """(P, samples^2) int64 the face each of ``samples`` x ``samples`` sub-pixel rays through
         each of ``pixels`` (P,) (row-major indices) hits, -1 on a miss
         (:meth:`Camera.subpixel_directions`; not kept)."""
+        if isinstance(samples, bool) or not float(samples).is_integer() or samples < 1:
+            raise InputError(f"subpixel_faces: samples must be an integer >= 1, got {samples!r}")
         s = int(samples)
         if len(pixels) == 0:   # Dr.Jit aborts the process on a launch of no rays
             return np.zeros((0, s * s), dtype=np.int64)
@@ -261,3 +266,11 @@ class ClusterCaster:
     def escapes(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(N,) bool: each ray hits no face of the whole mesh (:meth:`RayCaster.escapes`)."""
         return self.whole.escapes(origins, directions)
+
+
+def _check_rays(origins: np.ndarray, directions: np.ndarray) -> None:
+    """Refuse ray arrays that are not (N, 3) alike: a launch Dr.Jit cannot size (rays of
+    unequal counts, or none beside some) aborts the whole process."""
+    o, d = np.shape(origins), np.shape(directions)
+    if len(o) != 2 or o[1:] != (3,) or o != d:
+        raise InputError(f"rays need origins and directions of one shape (N, 3), got {o} and {d}")
