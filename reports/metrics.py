@@ -10,8 +10,8 @@ from estimator import InputError, psnr_db, sh
 def adjusted_rand_index(truth: np.ndarray, labels: np.ndarray) -> float:
     """Adjusted Rand index (Hubert & Arabie 1985) of two labelings (N,); 1 = same partition."""
     truth, labels = np.asarray(truth), np.asarray(labels)
-    if truth.shape != labels.shape or truth.ndim != 1:
-        raise ValueError(f"labelings must be 1-D of equal length, got {truth.shape} and {labels.shape}")
+    if truth.shape != labels.shape or truth.ndim != 1 or not len(truth):
+        raise InputError(f"labelings must be 1-D of one length > 0, got {truth.shape} and {labels.shape}")
     _, t = np.unique(truth, return_inverse=True)
     _, l = np.unique(labels, return_inverse=True)
     table = np.zeros((t.max() + 1, l.max() + 1), dtype=np.int64)
@@ -107,14 +107,12 @@ def albedo_ratios(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray, sca
     e, t = _compared(estimate, truth, mask)
     if scale == "dc":
         if dc is None:
-            raise ValueError("scale 'dc' needs the DC coefficient of the true illumination")
+            raise InputError("scale 'dc' needs the DC coefficient of the true illumination")
         t = t * np.asarray(dc, float)[None]
     elif scale == "lstsq":
         e = e * lstsq_scale(e, t)[None]
-    elif scale == "robust":
+    else:   # 'robust'
         e = e * robust_scale(e, t)[0][None]
-    else:
-        raise ValueError(f"scale must be one of {SCALES}, got {scale!r}")
     with np.errstate(divide="ignore", invalid="ignore"):
         per_channel = np.where(t > 0, e / t, np.nan)
         lum = (e @ LUMINANCE) / (t @ LUMINANCE)
@@ -186,6 +184,8 @@ def align_scale(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray)
 
 def psnr(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarray, peak: float) -> float:
     """PSNR (dB) over the masked pixels with the given peak (:func:`estimator.psnr_db`)."""
+    if not np.any(mask):
+        raise InputError("PSNR over no pixel: the mask is empty")
     return psnr_db(float(np.mean((prediction[mask] - reference[mask]) ** 2)), peak)
 
 
@@ -214,7 +214,11 @@ def image_metrics(prediction: np.ndarray, reference: np.ndarray, mask: np.ndarra
     masked values, peak 1.
     """
     if not mask.any():
-        raise ValueError("no pixel to compare: the object covers none of the reference image")
+        raise InputError("no pixel to compare: the object covers none of the reference image")
+    if min(reference.shape[:2]) < 7:   # SSIM's Gaussian window (sigma 1.5) spans 7 x 7 pixels
+        raise InputError(f"images must be at least 7 x 7 pixels for SSIM's window, got {reference.shape[:2]}")
+    if prediction.shape != reference.shape:
+        raise InputError(f"prediction {prediction.shape} and reference {reference.shape} differ in shape")
     pred = align_scale(prediction, reference, mask) if align else prediction
     peak = float(reference[mask].max())
     exposure = float(np.percentile(reference[mask], 99))

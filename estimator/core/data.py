@@ -57,6 +57,10 @@ class TriangleMesh:
             raise InputError("mesh face indices must be integers in [0, V)")
         if not np.all(np.isfinite(v)):
             raise InputError("mesh vertices contain NaN or Inf")
+        # areas and normals are products of two coordinate differences: past ~1e154 they overflow
+        if float(np.abs(v).max()) > 1e150:
+            raise InputError(f"mesh vertex coordinates reach {float(np.abs(v).max()):.3g}: their face areas overflow "
+                             "double precision; rescale the mesh")
         if np.all(_flat(v[f])):
             raise InputError(f"mesh has no face with non-zero area ({f.shape[0]} degenerate faces, their area zero "
                              "or within the rounding of their coordinates)")
@@ -200,6 +204,8 @@ class View:
     def __post_init__(self):
         rgb = np.asarray(self.rgb, dtype=np.float32)
         cam = self.camera
+        if not isinstance(cam, Camera):
+            raise InputError(f"view {self.name}: camera must be a Camera, got {type(cam).__name__}")
         if rgb.ndim != 3 or rgb.shape[2] != 3:
             raise InputError(f"view {self.name}: image must be (H, W, 3), got {rgb.shape}")
         if rgb.shape[:2] != (cam.height, cam.width):
@@ -214,6 +220,10 @@ class View:
                 raise InputError(f"view {self.name}: alpha shape {alpha.shape} != image {rgb.shape[:2]}")
             if not np.all(np.isfinite(alpha)):
                 raise InputError(f"view {self.name}: alpha contains NaN or Inf pixels")
+            # a coverage: a share of the pixel in [0, 1] (half-float files overshoot 1 by a spacing)
+            if alpha.size and (alpha.min() < -0.01 or alpha.max() > 1.01):
+                raise InputError(f"view {self.name}: alpha must be a coverage in [0, 1], got values from "
+                                 f"{alpha.min():.3g} to {alpha.max():.3g}")
             object.__setattr__(self, "alpha", alpha)
 
 

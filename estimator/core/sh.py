@@ -215,8 +215,8 @@ def axis_angle_matrix(axis, degrees_: float) -> np.ndarray:
 
 def fibonacci_sphere(n: int) -> np.ndarray:
     """``n`` nearly uniform unit directions (golden-spiral lattice), shape (n, 3)."""
-    if n < 4:
-        raise InputError(f"need at least 4 directions, got {n}")
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 4:
+        raise InputError(f"need a whole number of at least 4 directions, got {n!r}")
     i = np.arange(n) + 0.5
     y = 1.0 - 2.0 * i / n
     r = np.sqrt(1.0 - y * y)
@@ -252,6 +252,9 @@ def project_latlong(order: int, image: np.ndarray) -> np.ndarray:
     of rows of :data:`PROJECTION_PIXELS` pixels, after averaging a map wider than
     :data:`PROJECTION_WIDTH` onto a grid that wide.
     """
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[0] < 2 or image.shape[1] < 2:
+        raise InputError(f"a lat-long map must be (H, W, C) with H and W at least 2, got shape {image.shape}")
     h, w = image.shape[:2]
     if w > PROJECTION_WIDTH:
         h, w = max(3, round((h - 1) * PROJECTION_WIDTH / w) + 1), PROJECTION_WIDTH
@@ -321,6 +324,8 @@ def phong_filtered(radiance: np.ndarray, exponent: float, order: int | None = No
     """Radiance SH (M, C) filtered by the Phong lobe of ``exponent`` (per degree, no
     renormalisation: the DC is kept), truncated to ``order`` (default: the radiance's)."""
     radiance = np.asarray(radiance, dtype=np.float64)
+    if radiance.ndim != 2:
+        raise InputError(f"radiance SH must be (M, C) coefficients per channel, got shape {radiance.shape}")
     have = order_of(radiance.shape[0])
     order = have if order is None else order
     if order > have:

@@ -97,3 +97,20 @@ def test_estimate_checks_its_arguments_and_a_config_changed_after_its_making(sce
         estimate(data, "median-color", {"sh_order": 2})
     order = EstimatorConfig(sh_order=np.int64(2)).sh_order     # numpy's integers are taken, held as int
     assert order == 2 and type(order) is int
+
+
+def test_a_view_and_a_mesh_out_of_their_domain_are_refused(scene):
+    from estimator import TriangleMesh, View
+
+    view = scene[0].views[0]
+    with pytest.raises(InputError, match=r"alpha must be a coverage in \[0, 1\]"):
+        View(view.name, view.camera, view.rgb, np.full(view.rgb.shape[:2], 5.0))
+    with pytest.raises(InputError, match="camera must be a Camera"):
+        View(view.name, None, view.rgb)
+    mesh = scene[0].mesh
+    with pytest.raises(InputError, match="face areas overflow"):
+        TriangleMesh(mesh.vertices * 1e200, mesh.faces)
+    with pytest.raises(InputError, match=r"radiance SH must be \(M, C\)"):
+        sh.pseudo_illumination(np.ones(4), 10.0)
+    with pytest.raises(InputError, match="lat-long map must be"):
+        sh.project_latlong(2, np.ones((1, 8, 3)))

@@ -26,3 +26,15 @@ def test_metrics_refuse_what_they_would_score_wrongly():
     light = np.zeros((9, 3))
     light[0] = 1.0
     assert metrics.irradiance_error(light, light[:1]) < 1e-12   # a truth of a lower order is padded, not spread
+
+
+def test_image_metrics_ari_and_psnr_refuse_what_has_no_value():
+    from reports import metrics
+
+    image = np.ones((5, 5, 3))
+    with pytest.raises(InputError, match="at least 7 x 7 pixels"):
+        metrics.image_metrics(image, image, np.ones((5, 5), bool))
+    with pytest.raises(InputError, match="mask is empty"):
+        metrics.psnr(image, image, np.zeros((5, 5), bool), 1.0)
+    with pytest.raises(InputError, match="one length > 0"):
+        metrics.adjusted_rand_index(np.zeros(0, int), np.zeros(0, int))
