@@ -64,6 +64,8 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
             if len(shape) != 2 or shape[1] != 3:
                 raise InputError(f"{name} must be ((L + 1)^2, 3) SH coefficients per channel, got {shape}")
             sh.order_of(shape[0])
+    if exponent_candidates is not None:
+        exponent_candidates = tuple(exponent_candidates)
     if exponent_candidates is not None and not (
             len(exponent_candidates) and all(isinstance(n, numbers.Real) and not isinstance(n, bool)
                                              and np.isfinite(n) and n > 0 for n in exponent_candidates)):

@@ -56,28 +56,33 @@ def robust_scale(values: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray,
 def lstsq_scale(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """Per-channel least-squares scale s minimising ||s values - reference||.
 
-    values, reference : (N, C) -> (C,); 1 where ``values`` is all zero in a channel.
+    values, reference : (N, C) -> (C,); 1 where ``values`` is all zero in a channel. A negative
+    scale is refused: the estimate runs against the truth in that channel, and flipping it
+    would score a negated estimate as perfect.
     """
     v, r = np.asarray(values, float), np.asarray(reference, float)
     num, den = np.sum(v * r, axis=0), np.sum(v * v, axis=0)
-    return np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
+    scale = np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
+    if np.any(scale < 0):
+        raise InputError(f"the estimate runs against the truth in channel(s) {np.nonzero(scale < 0)[0].tolist()}: "
+                         "its least-squares gauge would be negative")
+    return scale
 
 
 def _compared(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The masked rows of ``estimate`` and ``truth`` (F, 3) as float arrays, refusing what would
     score wrongly without a word: shapes that differ, a mask that is not (F,) bool (0/1
-    integers would index faces 0 and 1), and estimated albedos that are non-finite or negative
-    (no surface reflects so, and a negative channel would take a negative gauge that makes
-    a negated estimate perfect)."""
+    integers would index faces 0 and 1), and non-finite estimated albedos (one turns every
+    ratio to NaN)."""
     e, t, m = np.asarray(estimate, float), np.asarray(truth, float), np.asarray(mask)
     if e.shape != t.shape or e.ndim != 2:
         raise InputError(f"estimate and truth must be albedos of one shape (F, C), got {e.shape} and {t.shape}")
     if m.dtype != bool or m.shape != (len(e),):
         raise InputError(f"mask must be ({len(e)},) bool, got {m.shape} {m.dtype}")
     e, t = e[m], t[m]
-    bad = ~np.all(np.isfinite(e), axis=1) | np.any(e < 0, axis=1)
+    bad = ~np.all(np.isfinite(e), axis=1)
     if bad.any():
-        raise InputError(f"{int(bad.sum())} compared face(s) have a non-finite or negative estimated albedo (first: "
+        raise InputError(f"{int(bad.sum())} compared face(s) have a non-finite estimated albedo (first: "
                          f"row {int(np.nonzero(m)[0][np.argmax(bad)])}); mark them unestimated before scoring")
     return e, t
 

@@ -57,8 +57,8 @@ class TriangleMesh:
             raise InputError("mesh face indices must be integers in [0, V)")
         if not np.all(np.isfinite(v)):
             raise InputError("mesh vertices contain NaN or Inf")
-        # areas and normals are products of two coordinate differences: past ~1e154 they overflow
-        if float(np.abs(v).max()) > 1e150:
+        # areas and normals square products of two coordinate differences: past ~1e77 they overflow
+        if float(np.abs(v).max()) > 1e75:
             raise InputError(f"mesh vertex coordinates reach {float(np.abs(v).max()):.3g}: their face areas overflow "
                              "double precision; rescale the mesh")
         if np.all(_flat(v[f])):

@@ -76,7 +76,7 @@ def basis(order: int, dirs: np.ndarray) -> np.ndarray:
     -------
     (N, (L + 1)^2) float64.
     """
-    d = _directions(dirs)
+    d, order = _directions(dirs), _order(order)
     out = np.empty((len(d), num_coeffs(order)))
     for rows, block in _blocks(order, d):
         out[rows] = block.T
@@ -98,7 +98,7 @@ def evaluate(order: int, dirs: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
     -------
     (N, C) float64.
     """
-    d = _directions(dirs)
+    d, order = _directions(dirs), _order(order)
     m = num_coeffs(order)
     coeffs = np.asarray(coeffs, dtype=np.float64)
     if coeffs.ndim != 2 or coeffs.shape[0] != m:
@@ -253,8 +253,8 @@ def project_latlong(order: int, image: np.ndarray) -> np.ndarray:
     :data:`PROJECTION_WIDTH` onto a grid that wide.
     """
     image = np.asarray(image)
-    if image.ndim != 3 or image.shape[0] < 2 or image.shape[1] < 2:
-        raise InputError(f"a lat-long map must be (H, W, C) with H and W at least 2, got shape {image.shape}")
+    if image.ndim != 3 or image.shape[0] < 3 or image.shape[1] < 2:
+        raise InputError(f"a lat-long map must be (H, W, C) with H >= 3 rows and W >= 2, got shape {image.shape}")
     h, w = image.shape[:2]
     if w > PROJECTION_WIDTH:
         h, w = max(3, round((h - 1) * PROJECTION_WIDTH / w) + 1), PROJECTION_WIDTH

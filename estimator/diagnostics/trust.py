@@ -347,11 +347,11 @@ def noise_level(columns: list[np.ndarray], residual: np.ndarray, estimated: np.n
             else:
                 a, b, c = summed(x[0] ** 2), summed(x[0] * x[1]), summed(x[1] ** 2)
                 det = a * c - b * b
-                whole = det > 1e-12 * a * c   # otherwise the columns are collinear in the group, or one is 0
+                # otherwise the columns are collinear in the group, or one is 0 (or a * c underflows)
+                whole = (a * c > 0) & (det > 1e-12 * a * c)
                 leverage = np.where(whole, (c * x[0] ** 2 - 2 * b * x[0] * x[1] + a * x[1] ** 2) / det,
                                     (x[0] ** 2 + x[1] ** 2) / (a + c))
-        leverage = np.nan_to_num(leverage)
-        free = leverage < 1.0 - 1e-9
+        free = np.isfinite(leverage) & (leverage < 1.0 - 1e-9)   # a row of non-finite coefficients says nothing
         if not free.any():
             free, leverage = np.ones(len(index), bool), np.zeros(len(index))
         sigma[k] = 1.4826 * np.median(np.abs(residual[index[free], k]) / np.sqrt(1.0 - leverage[free]))

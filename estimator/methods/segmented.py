@@ -135,6 +135,7 @@ class BilinearSegmented(BilinearClustered):
         per_region = 2 if c.components == "both" else 1
         unknowns = per_region * regions + int((observed & ~grouped).sum()) + result.light.shape[0] - 1
         info = {"clusters": int(len(np.unique(face_group[observed]))), "uniform_regions": regions,
+                "own_specular_groups": regions,   # the labels below fit a specular of their own
                 "uniform_share": float(np.mean(grouped[observed])) if observed.any() else 0.0,
                 "angular_clusters": history[0], "regions_per_round": history,
                 "clustering_s": time.perf_counter() - t,

@@ -179,3 +179,36 @@ def test_a_fit_of_two_albedos_per_group_takes_both_columns_leverage():
     everything = np.ones(len(group), bool)
     np.testing.assert_allclose(noise_level([shade, gloss], residual, everything, group), 0.01, rtol=0.08)
     assert np.all(noise_level([shade], residual, everything, group) < 0.0075)
+
+
+def test_a_zero_or_collinear_second_column_takes_the_first_columns_leverage():
+    """A group whose gloss is 0 (no highlight), or proportional to its shading, fits one albedo:
+    its leverage is the one-column leverage, so the level equals the one-column level (and a
+    group of one row stays interpolated)."""
+    from estimator.diagnostics.trust import noise_level
+
+    rng = np.random.default_rng(2)
+    sizes = rng.integers(1, 6, 2000)
+    group, (shade,), residual = _fitted(sizes, 1, rng)
+    everything = np.ones(len(group), bool)
+    one = noise_level([shade], residual, everything, group)
+    np.testing.assert_allclose(noise_level([shade, np.zeros_like(shade)], residual, everything, group), one)
+    np.testing.assert_allclose(noise_level([shade, 2.0 * shade], residual, everything, group), one, rtol=1e-9)
+
+
+def test_free_faces_that_share_one_specular_give_no_specular_column():
+    """info['own_specular_groups'] = R: rows of labels below R keep their gloss column, the
+    others (free faces sharing one specular) get zeros."""
+    from types import SimpleNamespace
+
+    from estimator.diagnostics.trust import _fitted_columns
+
+    face = np.array([0, 0, 1, 1, 2])
+    gloss = np.full((5, 3), 0.5)
+    prep = SimpleNamespace(obs=SimpleNamespace(face=face), gloss=lambda light: gloss)
+    est = SimpleNamespace(config=EstimatorConfig(components="both"), light=None, labels=np.array([0, 1, 2]),
+                          info={"own_specular_groups": 1})
+    shade, kept = _fitted_columns(prep, est, np.ones((5, 3)))
+    np.testing.assert_array_equal(kept[:, 0], [0.5, 0.5, 0.0, 0.0, 0.0])
+    est.info = {}
+    assert np.all(_fitted_columns(prep, est, np.ones((5, 3)))[1] == 0.5)

@@ -16,8 +16,12 @@ def test_metrics_refuse_what_they_would_score_wrongly():
     a = rng.uniform(0.1, 0.9, (20, 3))
     with pytest.raises(InputError, match=r"mask must be \(20,\) bool"):
         metrics.albedo_ratios(a, a, (np.arange(20) < 5).astype(int), "lstsq")
-    with pytest.raises(InputError, match="non-finite or negative estimated albedo"):
+    with pytest.raises(InputError, match="gauge would be negative"):
         metrics.albedo_psnr(-a, a, np.ones(20, bool))
+    inf = a.copy()
+    inf[3, 1] = np.inf
+    with pytest.raises(InputError, match="non-finite estimated albedo"):
+        metrics.albedo_ratios(inf, a, np.ones(20, bool), "lstsq")
     with pytest.raises(InputError, match="gauge must be"):
         metrics.albedo_psnr(a, a, np.ones(20, bool), gauge="nope")
     gt = GroundTruth(a, a, np.eye(9, 3), {"exponent": 10.0}, {})
