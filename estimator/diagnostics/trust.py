@@ -282,7 +282,7 @@ def diagnose(prep: Prepared, est: Estimate, view_names: list[str]) -> tuple[dict
     # standard error of each face's diffuse albedo with the light fixed: sigma / sqrt(sum shade^2)
     with np.errstate(divide="ignore", invalid="ignore"):
         sigma = noise_level(_fitted_columns(prep, est, shade), residual, estimated, est.labels[obs.face])
-        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, outlier, sigma))
+        albedo_se = 1.0 / np.sqrt(_precision(obs.face, f, shade, outlier, sigma, obs.radiance_se))
         rel_se = np.linalg.norm(albedo_se, axis=1) / np.linalg.norm(est.diffuse + est.specular, axis=1)
     counts = np.bincount(obs.face, minlength=f)
     good = est.observed & np.isfinite(rel_se)
@@ -308,13 +308,21 @@ def _outliers(relative: np.ndarray, estimated: np.ndarray) -> tuple[float, np.nd
 
 
 def _precision(face: np.ndarray, num_faces: int, rows: np.ndarray, outlier: np.ndarray,
-               sigma: np.ndarray) -> np.ndarray:
-    """(F, 3) precision of a per-face albedo with the light fixed: sum over its inlier rows of
-    rows^2 (rows (N, 3): the albedo's coefficient in each observation) / sigma^2, ``sigma`` (3,)
-    the noise level per channel (:func:`noise_level`); 0 where a face has no row."""
-    info = np.stack([np.bincount(face, rows[:, k] ** 2 * ~outlier, minlength=num_faces) for k in range(3)], 1)
+               sigma: np.ndarray, radiance_se: np.ndarray | None = None) -> np.ndarray:
+    """(F, 3) precision of a per-face albedo with the light fixed, fitted by least squares to its
+    inlier rows (rows (N, 3): the albedo's coefficient x in each observation): the inverse of
+    sigma^2 / sum x^2 (``sigma`` (3,) the rows' noise level per channel, :func:`noise_level`)
+    plus, where every row of a face holds one radiance unmixed from shared pixels with standard
+    error s (``radiance_se`` (F, 3), :attr:`Observations.radiance_se`; None: none), that error
+    carried into the fit, s^2 (sum x)^2 / (sum x^2)^2. 0 where a face has no row."""
+    inlier = ~outlier
+    info = np.stack([np.bincount(face, rows[:, k] ** 2 * inlier, minlength=num_faces) for k in range(3)], 1)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        return np.nan_to_num(info / np.maximum(sigma ** 2, 1e-300)[None])
+        variance = np.maximum(sigma ** 2, 1e-300)[None] / info
+        if radiance_se is not None:
+            total = np.stack([np.bincount(face, rows[:, k] * inlier, minlength=num_faces) for k in range(3)], 1)
+            variance = variance + radiance_se ** 2 * (total / info) ** 2
+        return np.where(info > 0, np.nan_to_num(1.0 / variance), 0.0)
 
 
 def noise_level(columns: list[np.ndarray], residual: np.ndarray, estimated: np.ndarray,
@@ -382,8 +390,9 @@ def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndar
     _, outlier = _outliers(relative, estimated)
     face, f = prep.obs.face, prep.obs.num_faces
     sigma = noise_level(_fitted_columns(prep, est, shade), residual, estimated, est.labels[face])
-    return (_precision(face, f, shade, outlier, sigma),
-            _precision(face, f, prep.gloss(est.light), outlier, sigma))
+    unmixed = prep.obs.radiance_se
+    return (_precision(face, f, shade, outlier, sigma, unmixed),
+            _precision(face, f, prep.gloss(est.light), outlier, sigma, unmixed))
 
 
 def _finite_or_none(value: float) -> float | None:

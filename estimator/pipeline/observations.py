@@ -13,7 +13,7 @@ from ..core.reductions import group_quantile
 from ..core.settings import Section
 from ..rays.raycast import RayCaster
 from ..solvers import robust
-from .footprints import Footprints, footprint_radiance, pixel_shares, unmixed_rows
+from .footprints import Footprints, footprint_radiance, pixel_shares, radiance_error, unmixed_rows
 
 
 @dataclass
@@ -85,6 +85,11 @@ class Observations:
         ``min_pixels`` of their pixels whole, and the images resolve the faces elsewhere, so no
         face is observed through its footprint (:func:`gather_observations`; empty for
         observations made otherwise, e.g. merged into clusters).
+    radiance_se : (num_faces, 3) float64 the standard error of each unresolved face's radiance
+        unmixed from the pixels it shares (:func:`.footprints.radiance_error`), 0 for the other
+        faces; every row of such a face holds that one radiance, so the albedos' standard
+        errors add it (:func:`estimator.diagnostics.trust.albedo_precision`). None: no face was
+        unmixed.
     black_views : (K,) int64 views that show the mesh black (no pixel on it above zero): a
         diffuse face's colour is the same from every view, so zeros where other views see it
         lit are a failed capture, not light, and the view gives no row; a face unlit from
@@ -103,6 +108,7 @@ class Observations:
     footprint_pixels: float | None = None
     rowless_views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     black_views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    radiance_se: np.ndarray | None = None
 
     @cached_property
     def face_levels(self) -> np.ndarray:
@@ -116,7 +122,7 @@ class Observations:
         """The rows where ``keep`` (N,) is true."""
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
                             self.rejected, None if self.view is None else self.view[keep], self.unresolved,
-                            self.footprint_pixels, self.rowless_views, self.black_views)
+                            self.footprint_pixels, self.rowless_views, self.black_views, self.radiance_se)
 
     def merged(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> "Observations":
         """One row per (cluster, view) pair: the ``weight``-weighted mean colour and view
@@ -191,11 +197,12 @@ def _face_means(ids: np.ndarray, valid: np.ndarray, rgb: np.ndarray, num_faces: 
 
 def _unmixed_rows(caster: RayCaster, views: list[View], usable: list[np.ndarray], centre_ids: list[np.ndarray],
                   footprint: np.ndarray, samples: int,
-                  min_pixels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  min_pixels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows of the ``footprint`` faces (F,) bool, unmixed from every usable pixel
     (``usable``: (H*W,) bool per view) as equations in the faces its ``samples`` x ``samples``
-    sub-pixel rays hit (:mod:`.footprints`): (K,) faces, views, (K, 3) colours and (K,) the
-    pixel area each row's face covers in its view. A (face, view) pair gives a row where the
+    sub-pixel rays hit (:mod:`.footprints`): (K,) faces, views, (K, 3) colours, (K,) the
+    pixel area each row's face covers in its view, and (F, 3) the standard error of every
+    face's footprint radiance (:func:`.footprints.radiance_error`). A (face, view) pair gives a row where the
     centre rays of ``min_pixels`` usable pixels hit the face (as without sub-pixel rays) or
     where the face covers at least half of ``min_pixels`` pixels' area. A pixel whose sub-pixel
     rays miss the mesh (a silhouette) is left out."""
@@ -214,7 +221,7 @@ def _unmixed_rows(caster: RayCaster, views: list[View], usable: list[np.ndarray]
     radiance, _ = footprint_radiance(fp, caster.mesh.face_adjacency)
     face, view, rgb, share = unmixed_rows(fp, radiance)
     keep = footprint[face] & ((share >= 0.5 * min_pixels) | np.isin(view * f + face, np.concatenate(centres)))
-    return face[keep], view[keep], rgb[keep], share[keep]
+    return face[keep], view[keep], rgb[keep], share[keep], radiance_error(fp, radiance)
 
 
 def check_transparent(views: list[View], min_alpha: float) -> None:
@@ -347,7 +354,10 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
     unresolved = footprint & (np.bincount(face, minlength=f) > 0)
     dense = pure_pixels and unresolved.any()
+    radiance_se = None
+    if dense and unmixed is not None:   # the unmixed faces' radiance error; the others' rows are their own pixels
+        radiance_se = np.where(unresolved[:, None], unmixed[4], 0.0)
     return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
                         view_index.astype(np.int64), unresolved if dense else None,
                         footprint_pixels / max(int(unresolved[face].sum()), 1) if dense else None,
-                        np.array(empty, dtype=np.int64), black.astype(np.int64))
+                        np.array(empty, dtype=np.int64), black.astype(np.int64), radiance_se)

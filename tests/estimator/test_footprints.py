@@ -114,3 +114,40 @@ def test_one_sub_pixel_ray_is_the_pixel_centre_ray_and_more_tile_the_pixel():
     caster = RayCaster(sphere(2))
     np.testing.assert_array_equal(caster.subpixel_faces(cam, 1, np.arange(1200)).ravel(),
                                   caster.face_id_buffer(cam).ravel())
+
+
+def test_a_faces_radiance_error_grows_as_its_share_of_the_pixels_shrinks():
+    """Pixels with noise of 0.01, each holding one face at a share of 1, 1/2 or 1/8: each face's
+    radiance error is the pixels' noise level over the root of its summed squared shares (a face
+    an eighth of one pixel: 8 times the noise); a face in no pixel has an infinite one."""
+    from estimator.pipeline.footprints import radiance_error
+
+    rng = np.random.default_rng(3)
+    pixels = 4000
+    share = np.array([1.0, 0.5, 0.125, 0.0])
+    rows = np.arange(pixels)
+    # each pixel covered by one face alone, in turn: the first three faces, 1/3 of the pixels each
+    owner = rows % 3
+    shares = sp.csr_matrix((share[owner], (rows, owner)), shape=(pixels, 4))
+    rgb = rng.normal(0.0, 0.01, (pixels, 3))
+    error = radiance_error(Footprints(shares, rgb, np.zeros(pixels, np.int64)), np.zeros((4, 3)))
+    count = pixels / 3
+    expected = 0.01 / np.sqrt(count * share[:3] ** 2)
+    np.testing.assert_allclose(error[:3, 0], expected, rtol=0.1)
+    assert np.all(np.isinf(error[3]))
+
+
+def test_an_unmixed_radiance_error_enters_every_row_of_the_face():
+    """One row per view x = 1 for a face: the albedo's variance is sigma^2 / n from the rows plus
+    s^2 from the one radiance every row holds (s the radiance error), so its precision saturates
+    at 1 / s^2 however many views see it."""
+    from estimator.diagnostics.trust import _precision
+
+    n = np.array([1, 4, 100])
+    face = np.repeat(np.arange(3), n)
+    rows = np.ones((len(face), 3))
+    sigma = np.full(3, 0.01)
+    s = np.full((3, 3), 0.05)
+    precision = _precision(face, 3, rows, np.zeros(len(face), bool), sigma, s)
+    np.testing.assert_allclose(precision[:, 0], 1.0 / (0.01 ** 2 / n + 0.05 ** 2), rtol=1e-12)
+    np.testing.assert_allclose(_precision(face, 3, rows, np.zeros(len(face), bool), sigma)[:, 0], n / 0.01 ** 2)
