@@ -2,7 +2,6 @@
 diagnostics."""
 from __future__ import annotations
 
-import numbers
 import time
 from dataclasses import replace
 
@@ -12,7 +11,7 @@ from .config import EstimatorConfig
 from .core import sh
 from .core.blas import limited_blas
 from .core.data import MultiViewData
-from .core.errors import InputError
+from .core.errors import InputError, is_number
 from .diagnostics import screening, trust
 from .methods import get_method
 from .methods.base import REGISTRY
@@ -67,8 +66,7 @@ def estimate(data: MultiViewData, method: str | None = None, config: EstimatorCo
     if exponent_candidates is not None:
         exponent_candidates = tuple(exponent_candidates)
     if exponent_candidates is not None and not (
-            len(exponent_candidates) and all(isinstance(n, numbers.Real) and not isinstance(n, bool)
-                                             and np.isfinite(n) and n > 0 for n in exponent_candidates)):
+            len(exponent_candidates) and all(is_number(n) and np.isfinite(n) and n > 0 for n in exponent_candidates)):
         raise InputError(f"exponent_candidates must be Phong exponents > 0, at least one, got {exponent_candidates!r}")
     with limited_blas(config.blas_threads):
         return _estimate(data, method, config, known_sh, known_radiance, log, exponent_candidates, caster)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, is_number, is_whole
 
 _GL_FROM_MITSUBA = np.diag([-1.0, 1.0, -1.0, 1.0])
 _CV_FROM_GL = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -107,11 +107,11 @@ class Camera:
                              "orthonormal with determinant +1 and its last row 0 0 0 1)")
         for name in ("width", "height"):   # pixel counts: 40.0 or True would fail deep in a render
             value = getattr(self, name)
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            if not is_whole(value):
                 raise InputError(f"camera {name} must be an integer number of pixels, got {value!r}")
         for name in ("fx", "fy", "cx", "cy"):
             value = getattr(self, name)
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            if not is_number(value):
                 raise InputError(f"camera {name} must be a number, got {value!r}")
         values = (self.fx, self.fy, self.cx, self.cy, self.width, self.height)
         if not all(np.isfinite(v) for v in values):
@@ -125,8 +125,7 @@ class Camera:
     @classmethod
     def from_fov(cls, c2w: np.ndarray, fov_x_deg: float, width: int, height: int) -> "Camera":
         """Square-pixel camera with the principal point at the image centre."""
-        if isinstance(fov_x_deg, (bool, np.bool_)) or not isinstance(fov_x_deg, (int, float, np.integer, np.floating)) \
-                or not 0.0 < fov_x_deg < 180.0:
+        if not is_number(fov_x_deg) or not 0.0 < fov_x_deg < 180.0:
             raise InputError(f"fov_x must lie in (0, 180) degrees, got {fov_x_deg}")
         f = 0.5 * width / np.tan(0.5 * np.radians(fov_x_deg))
         return cls(c2w, f, f, 0.5 * width, 0.5 * height, int(width), int(height))

@@ -61,9 +61,12 @@ class TriangleMesh:
         if float(np.abs(v).max()) > 1e75:
             raise InputError(f"mesh vertex coordinates reach {float(np.abs(v).max()):.3g}: their face areas overflow "
                              "double precision; rescale the mesh")
-        if np.all(_flat(v[f])):
+        flat = _flat(v[f])
+        if np.all(flat):
             raise InputError(f"mesh has no face with non-zero area ({f.shape[0]} degenerate faces, their area zero "
                              "or within the rounding of their coordinates)")
+        flat.setflags(write=False)
+        self.__dict__["flat"] = flat   # :attr:`flat`'s cache: the check has computed it
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", np.ascontiguousarray(f, dtype=np.int64))
 
@@ -99,7 +102,7 @@ class TriangleMesh:
     def flat(self) -> np.ndarray:
         """(F,) bool faces without a normal: a doubled area within :data:`FLAT_TOLERANCE` of the
         rounding of their coordinates (zero area, or collinear corners written in float32);
-        computed once per mesh and read-only."""
+        computed once per mesh, by the mesh's own check when it is made, and read-only."""
         flat = _flat(self.corners)
         flat.setflags(write=False)
         return flat

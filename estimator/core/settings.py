@@ -9,12 +9,9 @@ reader may be handed the whole configuration.
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, fields
 
-import numpy as np
-
-from .errors import InputError
+from .errors import InputError, is_number, is_whole
 
 
 @dataclass
@@ -44,12 +41,11 @@ class Section:
             elif isinstance(default, bool):
                 ok = isinstance(value, bool)
             elif isinstance(default, int):   # numpy's integers too, held as int
-                ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+                ok = is_whole(value)
                 if ok:
                     object.__setattr__(self, f.name, int(value))
             elif isinstance(default, float):
-                ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) \
-                    and math.isfinite(value)
+                ok = is_number(value) and math.isfinite(value)
                 if ok:
                     object.__setattr__(self, f.name, float(value))
             else:

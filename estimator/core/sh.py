@@ -23,7 +23,7 @@ import numpy as np
 from scipy import special
 
 from . import latlong
-from .errors import InputError
+from .errors import InputError, is_number, is_whole
 
 
 def num_coeffs(order: int) -> int:
@@ -33,8 +33,7 @@ def num_coeffs(order: int) -> int:
 
 def _order(order) -> int:
     """``order`` as an int, refused unless it is a whole number >= 0 (2.5 or True is no order)."""
-    if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer, float, np.floating)) \
-            or not float(order).is_integer() or order < 0:
+    if not is_number(order) or not float(order).is_integer() or order < 0:
         raise InputError(f"SH order must be a whole number >= 0, got {order!r}")
     return int(order)
 
@@ -215,7 +214,7 @@ def axis_angle_matrix(axis, degrees_: float) -> np.ndarray:
 
 def fibonacci_sphere(n: int) -> np.ndarray:
     """``n`` nearly uniform unit directions (golden-spiral lattice), shape (n, 3)."""
-    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 4:
+    if not is_whole(n) or n < 4:
         raise InputError(f"need a whole number of at least 4 directions, got {n!r}")
     i = np.arange(n) + 0.5
     y = 1.0 - 2.0 * i / n

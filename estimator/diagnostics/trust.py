@@ -366,15 +366,16 @@ def noise_level(columns: list[np.ndarray], residual: np.ndarray, estimated: np.n
     return sigma
 
 
-def _fitted_columns(prep: Prepared, est: Estimate, shade: np.ndarray) -> list[np.ndarray]:
+def _fitted_columns(prep: Prepared, est: Estimate, shade: np.ndarray,
+                    gloss: np.ndarray | None = None) -> list[np.ndarray]:
     """The coefficients (N, 3) of the albedos each row's group fits: the diffuse shading
-    ``shade``, the specular gloss, or both (``est.config.components``). A method whose free
+    ``shade``, the specular ``gloss`` (None: computed here), or both (``est.config.components``). A method whose free
     faces share one specular (``info['own_specular_groups']``: the labels below it fit their
     own) gives those rows no specular column: one unknown over all of them moves no row's fit."""
     components = est.config.components
     columns = [] if components == "specular" else [shade]
     if components != "diffuse":
-        gloss = prep.gloss(est.light)
+        gloss = prep.gloss(est.light) if gloss is None else gloss
         own = est.info.get("own_specular_groups")
         if own is not None and components == "both":
             gloss = gloss * (est.labels[prep.obs.face] < own)[:, None]
@@ -389,10 +390,11 @@ def albedo_precision(prep: Prepared, est: Estimate) -> tuple[np.ndarray, np.ndar
     estimated = est.observed[prep.obs.face]
     _, outlier = _outliers(relative, estimated)
     face, f = prep.obs.face, prep.obs.num_faces
-    sigma = noise_level(_fitted_columns(prep, est, shade), residual, estimated, est.labels[face])
+    gloss = prep.gloss(est.light)
+    sigma = noise_level(_fitted_columns(prep, est, shade, gloss), residual, estimated, est.labels[face])
     unmixed = prep.obs.radiance_se
     return (_precision(face, f, shade, outlier, sigma, unmixed),
-            _precision(face, f, prep.gloss(est.light), outlier, sigma, unmixed))
+            _precision(face, f, gloss, outlier, sigma, unmixed))
 
 
 def _finite_or_none(value: float) -> float | None:

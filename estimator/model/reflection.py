@@ -7,7 +7,7 @@ import numpy as np
 
 from ..core import sh
 from ..core.data import TriangleMesh
-from ..core.errors import InputError
+from ..core.errors import InputError, is_number
 from ..rays.visibility import SphereSampling, Visibility
 
 
@@ -55,7 +55,7 @@ def diffuse_matrix(mesh: TriangleMesh, sampling: SphereSampling, visibility: Vis
 def fresnel_dielectric(cos_theta: np.ndarray, ior: float) -> np.ndarray:
     """(N,) unpolarised Fresnel reflectance of a dielectric of index ``ior`` (from air) at
     incidence cosines (N,) (clamped to (0, 1])."""
-    if isinstance(ior, (bool, np.bool_)) or not (np.isfinite(ior) and ior > 0):
+    if not (is_number(ior) and np.isfinite(ior) and ior > 0):
         raise InputError(f"fresnel_dielectric: the index of refraction must be a finite number > 0, got {ior!r}")
     c = np.clip(cos_theta, 1e-6, 1.0)
     t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) * (1.0 / ior) ** 2, 0.0))   # 1/ior first: no overflow

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.camera import Camera
 from ..core.data import TriangleMesh
-from ..core.errors import InputError
+from ..core.errors import InputError, is_whole
 from . import backend
 
 
@@ -190,7 +190,7 @@ class RayCaster:
         """(P, samples^2) int64 the face each of ``samples`` x ``samples`` sub-pixel rays through
         each of ``pixels`` (P,) (row-major indices) hits, -1 on a miss
         (:meth:`Camera.subpixel_directions`; not kept)."""
-        if isinstance(samples, (bool, np.bool_)) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        if not is_whole(samples) or samples < 1:
             raise InputError(f"subpixel_faces: samples must be an integer >= 1, got {samples!r}")
         s = int(samples)
         if len(pixels) == 0:   # Dr.Jit aborts the process on a launch of no rays
