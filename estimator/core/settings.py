@@ -8,6 +8,7 @@ reader may be handed the whole configuration.
 """
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass, fields
 
@@ -17,6 +18,19 @@ from .errors import InputError, is_number, is_whole
 @dataclass
 class Section:
     """A configuration section: typed, finite fields with defaults, checked on creation."""
+
+    def __new__(cls, *args, **kwargs):
+        """Refuse a keyword that names no setting of ``cls`` (:class:`InputError` with the
+        nearest names), where the dataclass's own ``__init__`` raises a bare TypeError. Runs
+        before it with the same arguments; copies and pickles pass none."""
+        known = [f.name for f in fields(cls)]
+        unknown = [key for key in kwargs if key not in known]
+        if unknown:
+            near = sorted({n for key in unknown for n in difflib.get_close_matches(key, known, n=3)})
+            verb = "is not a setting" if len(unknown) == 1 else "are not settings"
+            raise InputError(f"estimator config: {', '.join(unknown)} {verb} of {cls.__name__}"
+                             + (f" (did you mean {', '.join(near)}?)" if near else ""))
+        return super().__new__(cls)
 
     def __post_init__(self):
         self._check_types()

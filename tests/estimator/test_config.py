@@ -2,6 +2,9 @@
 its code, and every bad value refused with the setting named."""
 from __future__ import annotations
 
+import copy
+import dataclasses
+import pickle
 from dataclasses import fields
 
 import pytest
@@ -71,6 +74,18 @@ def test_every_setting_has_one_section_and_one_default():
 def test_a_bad_value_is_refused_naming_the_setting(settings, named):
     with pytest.raises(InputError, match=named):
         EstimatorConfig(**settings)
+
+
+def test_an_unknown_setting_is_refused_with_the_nearest_names():
+    """A misspelt keyword is an InputError naming it and the settings it is near (the
+    dataclass alone raises a bare TypeError); copies, pickles and replace() still build."""
+    with pytest.raises(InputError, match=r"sh_ordr is not a setting of EstimatorConfig \(did you mean sh_order\?\)"):
+        EstimatorConfig(sh_ordr=4)
+    with pytest.raises(InputError, match="foo, bar are not settings"):
+        EstimatorConfig(foo=1, bar=2)
+    config = EstimatorConfig(sh_order=4)
+    assert copy.deepcopy(config) == config == pickle.loads(pickle.dumps(config))
+    assert dataclasses.replace(config, sh_order=6).sh_order == 6
 
 
 def test_low_orders_build_with_the_other_defaults():
