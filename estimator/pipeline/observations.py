@@ -85,11 +85,16 @@ class Observations:
         ``min_pixels`` of their pixels whole, and the images resolve the faces elsewhere, so no
         face is observed through its footprint (:func:`gather_observations`; empty for
         observations made otherwise, e.g. merged into clusters).
-    radiance_se : (num_faces, 3) float64 the standard error of each unresolved face's radiance
-        unmixed from the pixels it shares (:func:`.footprints.radiance_error`), 0 for the other
+    radiance_se : (num_faces, 3) float64 the standard error of each unresolved or thin face's
+        radiance unmixed from the pixels it shares (:func:`.footprints.radiance_error`), 0 for the other
         faces; every row of such a face holds that one radiance, so the albedos' standard
         errors add it (:func:`estimator.diagnostics.trust.albedo_precision`). None: no face was
         unmixed.
+    thin : (num_faces,) bool, on a mesh the pure pixels resolve, the faces they miss (thin or
+        small faces: a teapot's spout and rim) observed through their unmixed footprints as
+        ``unresolved`` faces are on a dense mesh; None when no face is. Their radiance is
+        noisier than a resolved face's (``radiance_se``), so a method may keep them out of
+        what the faces determine together (the light) and solve their albedos under it.
     black_views : (K,) int64 views that show the mesh black (no pixel on it above zero): a
         diffuse face's colour is the same from every view, so zeros where other views see it
         lit are a failed capture, not light, and the view gives no row; a face unlit from
@@ -109,6 +114,7 @@ class Observations:
     rowless_views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     black_views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     radiance_se: np.ndarray | None = None
+    thin: np.ndarray | None = None
 
     @cached_property
     def face_levels(self) -> np.ndarray:
@@ -122,7 +128,8 @@ class Observations:
         """The rows where ``keep`` (N,) is true."""
         return Observations(self.face[keep], self.rgb[keep], self.view_dir[keep], self.num_faces, self.num_views,
                             self.rejected, None if self.view is None else self.view[keep], self.unresolved,
-                            self.footprint_pixels, self.rowless_views, self.black_views, self.radiance_se)
+                            self.footprint_pixels, self.rowless_views, self.black_views, self.radiance_se,
+                            self.thin)
 
     def merged(self, cluster: np.ndarray, count: int, weight: np.ndarray) -> "Observations":
         """One row per (cluster, view) pair: the ``weight``-weighted mean colour and view
@@ -224,6 +231,20 @@ def _unmixed_rows(caster: RayCaster, views: list[View], usable: list[np.ndarray]
     return face[keep], view[keep], rgb[keep], share[keep], radiance_error(fp, radiance)
 
 
+def _around(faces: np.ndarray, mesh: TriangleMesh, usable: list[np.ndarray],
+            centre_ids: list[np.ndarray]) -> list[np.ndarray]:
+    """Per view, the ``usable`` pixels (H*W,) bool whose centre ray hits one of ``faces`` (F,)
+    bool or a face beside one: every pixel a face smaller than a pixel shares with its
+    neighbours, with the neighbours' own pixels that settle their radiance. On a mesh the
+    images resolve, the thin faces are unmixed from these alone (sub-pixel rays over every
+    pixel cost a second on a 5k-face teapot)."""
+    near = faces.copy()
+    pairs = mesh.face_adjacency
+    near[pairs[faces[pairs[:, 1]], 0]] = True
+    near[pairs[faces[pairs[:, 0]], 1]] = True
+    return [valid & near[np.maximum(ids.ravel(), 0)] for valid, ids in zip(usable, centre_ids)]
+
+
 def check_transparent(views: list[View], min_alpha: float) -> None:
     """Refuse (:class:`InputError`, naming them) views whose alpha is below ``min_alpha``
     everywhere: they show no pixel to estimate from. Checked before anything is traced (the
@@ -251,8 +272,10 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     the images resolve no face (a mesh denser than its photos): the faces without a pure
     pixel are then observed through the pixels they cover, each pixel an equation in the
     faces its ``subpixel_samples`` x ``subpixel_samples`` rays hit (:func:`_unmixed_rows`;
-    with one sample, the mean of the pixels whose centre ray hits the face). A few thin
-    faces of a coarser mesh stay unobserved rather than take a neighbour's colour, and a
+    with one sample, the mean of the pixels whose centre ray hits the face). Where they
+    resolve most faces, the faces they miss (thin or small faces of a coarser mesh) are
+    observed through their unmixed pixels too (``Observations.thin``); without sub-pixel
+    samples they stay unobserved rather than take a neighbour's colour. A
     view in which no face covers ``min_pixels`` pixels whole (a camera far from the object
     among nearer ones) gives no row: it is named (``rowless_views``), not refused. The
     pixels' equations are held in memory: beyond ``max_pixels`` usable pixels (None: no
@@ -299,11 +322,17 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
         hit[ids.ravel()[valid]] = True
         if row is not None:
             covered[row[0]] = True
-    footprint = ~covered if not pure_pixels or 2 * covered.sum() < hit.sum() else np.zeros(f, dtype=bool)
+    resolves = pure_pixels and 2 * covered.sum() >= hit.sum()
+    # on a mesh the images resolve, the faces no pure pixel covers (thin faces) are unmixed
+    # from the pixels about them, or not observed where nothing unmixes them: a pixel centre's
+    # colour would mix a neighbour's albedo into theirs
+    pixels = _around(hit & ~covered, mesh, usable, centre_ids) if resolves else usable
+    unmixing = pure_pixels and subpixel_samples > 1 and (max_pixels is None
+                                                         or sum(int(p.sum()) for p in pixels) <= max_pixels)
+    footprint = ~covered if not resolves else hit & ~covered if unmixing else np.zeros(f, dtype=bool)
     parts, footprint_pixels = [], 0
-    unmixed = _unmixed_rows(caster, views, usable, centre_ids, footprint, subpixel_samples, min_pixels) \
-        if pure_pixels and footprint.any() and subpixel_samples > 1 \
-        and (max_pixels is None or sum(int(u.sum()) for u in usable) <= max_pixels) else None
+    unmixed = _unmixed_rows(caster, views, pixels, centre_ids, footprint, subpixel_samples, min_pixels) \
+        if unmixing and footprint.any() else None
     for index, (view, ids, valid, row) in enumerate(zip(views, centre_ids, usable, pure_rows)):
         if footprint.any():   # the footprint rows, and the pure rows (none without pure_pixels)
             if unmixed is None:
@@ -353,11 +382,12 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     _check_exposure_levels(views, np.array(levels))
     face, rgb, view_dir, view_index = (np.concatenate(p) for p in zip(*parts))
     unresolved = footprint & (np.bincount(face, minlength=f) > 0)
-    dense = pure_pixels and unresolved.any()
+    dense = pure_pixels and unresolved.any() and not resolves
+    thin = unresolved if resolves and unresolved.any() else None
     radiance_se = None
-    if dense and unmixed is not None:   # the unmixed faces' radiance error; the others' rows are their own pixels
+    if unresolved.any() and unmixed is not None:   # the unmixed faces' radiance error; the others' rows: own pixels
         radiance_se = np.where(unresolved[:, None], unmixed[4], 0.0)
     return Observations(face.astype(np.int64), rgb, view_dir, f, len(views), np.array(rejected, dtype=np.int64),
                         view_index.astype(np.int64), unresolved if dense else None,
                         footprint_pixels / max(int(unresolved[face].sum()), 1) if dense else None,
-                        np.array(empty, dtype=np.int64), black.astype(np.int64), radiance_se)
+                        np.array(empty, dtype=np.int64), black.astype(np.int64), radiance_se, thin)

@@ -181,6 +181,13 @@ class Prepared:
                        c_matrix=self.diffuse_rows(faces), d_rows=self.specular_rows(np.nonzero(keep)[0]),
                        timings=dict(self.timings))
 
+    def row_subset(self, keep: np.ndarray) -> "Prepared":
+        """The problem with the kept observations ``keep`` (N,) bool of ``obs`` alone (rows
+        held; the faces, their numbering and ``all_obs`` as they are, and no face thin:
+        :attr:`Observations.thin` names faces whose rows these may have left out)."""
+        return replace(self, obs=replace(self.obs.subset(keep), thin=None),
+                       d_rows=None if self.d_rows is None else self.d_rows[keep], timings=dict(self.timings))
+
     def clustered(self, cluster: np.ndarray, representative: np.ndarray) -> "Prepared":
         """The problem on clusters of faces, its rows held, as if each cluster were one face:
         cluster k has one observation per view, the area-weighted mean of its faces' there

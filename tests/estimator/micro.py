@@ -18,12 +18,16 @@ def micro_config(**overrides) -> EstimatorConfig:
     return EstimatorConfig(**{"sh_order": ORDER, "directions": 300, "auto_pose": 0.0, **overrides})
 
 
-def micro_scene(config: EstimatorConfig | None = None, specular: float = 0.2) -> tuple[MultiViewData, Estimate]:
-    """The views and the true estimate (per-face albedos, the light) they were rendered from;
-    ``specular``: every face's grey specular albedo (a Phong lobe of exponent 10; 0: matte)."""
+def micro_scene(config: EstimatorConfig | None = None, specular: float = 0.2, mesh: TriangleMesh | None = None,
+                size: int = SIZE) -> tuple[MultiViewData, Estimate]:
+    """The views (``size`` pixels square) and the true estimate (per-face albedos, the light)
+    they were rendered from; ``specular``: every face's grey specular albedo (a Phong lobe of
+    exponent 10; 0: matte); ``mesh``: another mesh about the origin than the icosphere (its
+    faces above y = 0.2 the first region)."""
     config = config or micro_config()
-    ico = trimesh.creation.icosphere(subdivisions=2)
-    mesh = TriangleMesh(np.asarray(ico.vertices), np.asarray(ico.faces))
+    if mesh is None:
+        ico = trimesh.creation.icosphere(subdivisions=2)
+        mesh = TriangleMesh(np.asarray(ico.vertices), np.asarray(ico.faces))
     f = mesh.num_faces
     top = mesh.centroids[:, 1] > 0.2
     diffuse = np.where(top[:, None], [0.7, 0.3, 0.1], [0.1, 0.4, 0.6])
@@ -40,7 +44,7 @@ def micro_scene(config: EstimatorConfig | None = None, specular: float = 0.2) ->
         azimuth, elevation = 2 * np.pi * k / 8, (0.5 if k % 2 else -0.3)
         eye = 3.0 * np.array([np.cos(elevation) * np.sin(azimuth), np.sin(elevation),
                               np.cos(elevation) * np.cos(azimuth)])
-        camera = Camera(look_at(eye, np.zeros(3)), SIZE, SIZE, SIZE / 2, SIZE / 2, SIZE, SIZE)
+        camera = Camera(look_at(eye, np.zeros(3)), size, size, size / 2, size / 2, size, size)
         rgb, coverage = predictor.predict(camera)
         views.append(View(f"view{k}", camera, rgb, coverage))
     return MultiViewData(mesh, views), truth

@@ -20,6 +20,7 @@ from .clusters import carried, cluster_count, solve_on_clusters
 from .decision import choose, light_hypotheses, prediction_cost
 from .level import coat_level
 from .result import to_estimate
+from .thin import thin_faces, with_thin_faces
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
 
 
@@ -154,6 +155,9 @@ class RetinexSegmented(Method):
         finds again by segmentation: regions kept without it could not be carried)."""
         c = self.config
         t = time.perf_counter()
+        whole, thin = prep, thin_faces(prep.obs)
+        if thin is not None:   # steps 1-6 without them; they join the estimate under its light
+            prep = prep.row_subset(~thin[prep.obs.face])
         fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations
         est, chosen = self._fit(prep, fits)
         self.log(f"light from {est.info['light_from']} ({est.info['uniform_regions']} uniform regions), "
@@ -165,9 +169,11 @@ class RetinexSegmented(Method):
                 prep, est, chosen, level = self._remove_level(prep, fits, est, chosen)
                 if level.any():   # the candidates again, on the colours less the level, under the new light
                     candidates = None
-            est, chosen, applied = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
+            est, chosen, applied, prep = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
             if applied is not None:
                 weight = applied.weight
+        if thin is not None:
+            est = self._with_thin(whole, prep, fits, est, chosen, applied, level, thin)
         est.info["coat_level"] = level.tolist()
         est.info["coat_degree"] = None if applied is None else applied.order
         est.info["coat_exponent"] = None if applied is None else applied.exponent
@@ -198,7 +204,7 @@ class RetinexSegmented(Method):
 
     def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis, t: float,
                       keep_regions: bool = True, candidates: list[tuple[CoatReflection, np.ndarray]] | None = None
-                      ) -> tuple[Estimate, Hypothesis, CoatReflection | None]:
+                      ) -> tuple[Estimate, Hypothesis, CoatReflection | None, Prepared]:
         """Step 6: the coat's reflection of the environment's mean level (SH degree 0), of the
         light's low orders (``coat_order``) and, with ``coat_lobe``, a Phong lobe's
         (:meth:`_lobe_shape`), each fitted to the colours' changes across views,
@@ -210,17 +216,18 @@ class RetinexSegmented(Method):
         added back, one unknown per region's strength and two for the grey coat's shared
         colour: three with one group; the lobe's exponent one more). ``candidates``: those of
         :meth:`_coat_candidates` on these colours under ``est`` (None: found here). Returns the
-        estimate kept, its hypothesis and the reflection subtracted before it (None: none)."""
+        estimate kept, its hypothesis, the reflection subtracted before it (None: none) and the
+        problem it was fitted on (``prep``, its colours less that reflection)."""
         c, obs = self.config, prep.obs
         candidates = self._coat_candidates(prep, est) if candidates is None else candidates
         group = coat_groups(est, c.coat_per_region)[0][obs.face]
         est.info["coat_costs"] = None
         if not candidates:
-            return est, chosen, None
+            return est, chosen, None, prep
         found = first_sun(chosen)
         regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
-        fitted = [self._fit(replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)), fits, found, regions, False)
-                  for _, reflection in candidates]
+        corrected = [replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)) for _, reflection in candidates]
+        fitted = [self._fit(less, fits, found, regions, False) for less in corrected]
         # a coat's unknowns: its groups' strengths and two of the grey colour; a lobe's exponent one more
         costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
                                 [0] + [len(np.unique(group)) + 2 + (r.exponent is not None) for r, _ in candidates])
@@ -230,9 +237,37 @@ class RetinexSegmented(Method):
         self.log(f"coat's reflection: costs {costs_text}; {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
         applied = None
         if best:
-            (est, chosen), applied = fitted[best - 1], candidates[best - 1][0]
+            (est, chosen), applied, prep = fitted[best - 1], candidates[best - 1][0], corrected[best - 1]
         est.info["coat_costs"] = named
-        return est, chosen, applied
+        return est, chosen, applied, prep
+
+    def _with_thin(self, whole: Prepared, fitted: Prepared, fits: ReflectionFits, est: Estimate,
+                   chosen: Hypothesis, applied: CoatReflection | None, level: np.ndarray,
+                   thin: np.ndarray) -> Estimate:
+        """``est`` with the ``thin`` faces (F,) bool (:mod:`.thin`) joined to its regions under
+        its light (:func:`.thin.with_thin_faces`, in the context of the problem ``fitted`` the
+        estimate came from): their radiance is the same quantile as every face's, over their
+        rows of ``whole`` less the coat's ``level`` and ``applied`` reflection (a thin face is
+        in no region of the first fit, so in the last coat group). The fitted faces keep every
+        value, and the estimate its record of its choices; where none joins (a texture: no
+        region) it is returned as it is."""
+        if not chosen.regions:
+            return est
+        c, obs = self.config, whole.obs.subset(thin[whole.obs.face])
+        rgb = obs.rgb - level
+        if applied is not None:
+            normals = whole.data.mesh.face_normals[obs.face]
+            escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, whole.sampling, whole.visibility)
+            rgb = rgb - applied.weight[-1] * applied.rows(normals, obs.view_dir, c.coat_ior, escapes)
+        radiance = group_quantile(obs.face, rgb, obs.num_faces, c.retinex_quantile)
+        ctx, _ = self._context(fitted, fits)
+        joined = with_thin_faces(ctx, replace(chosen, radiance=np.where(thin[:, None], radiance, chosen.radiance)),
+                                 thin & (fitted.c_matrix[:, 0] > 0))
+        if np.array_equal(joined.lit, chosen.lit):
+            return est
+        out = to_estimate(ctx, joined, self)
+        out.info = {**est.info, **out.info}
+        return out
 
     def _coat_candidates(self, prep, est: Estimate) -> list[tuple[CoatReflection, np.ndarray]]:
         """The coat's reflections worth trying on the colours of ``prep`` under ``est``'s light:
@@ -291,6 +326,16 @@ class RetinexSegmented(Method):
         where ``prep``'s colours are less a coat's reflection or level a refit subtracted (the
         parted regions' modes are then not sought, :func:`.edges.parted_regions`). Returns the
         chosen estimate and its hypothesis."""
+        ctx, radiance = self._context(prep, fits, recorded)
+        hypotheses = light_hypotheses(ctx, radiance, found, labels)
+        estimates = [to_estimate(ctx, h, self) for h in hypotheses]
+        best = choose(prep, hypotheses, estimates)
+        return estimates[best], hypotheses[best]
+
+    def _context(self, prep, fits: ReflectionFits, recorded: bool = True) -> tuple[FitContext, np.ndarray]:
+        """What steps 1-5 read on the observations of ``prep`` (:class:`FitContext`: the usable
+        faces, the edge fit's arguments, the shading the object adds to itself), and the (F, 3)
+        diffuse radiance of each face (a low quantile of its colours over its views)."""
         c = self.config
         mesh, obs = prep.data.mesh, prep.obs
         radiance = group_quantile(obs.face, obs.rgb, mesh.num_faces, c.retinex_quantile)
@@ -310,7 +355,5 @@ class RetinexSegmented(Method):
             if fits.transfer is None:
                 fits.transfer = indirect.indirect_transfer(prep.caster, prep.sampling, prep.visibility)
             ctx.fit["indirect"] = ctx.extra = fits.transfer @ np.where(usable[:, None], radiance, 0.0)
-        hypotheses = light_hypotheses(ctx, radiance, found, labels)
-        estimates = [to_estimate(ctx, h, self) for h in hypotheses]
-        best = choose(prep, hypotheses, estimates)
-        return estimates[best], hypotheses[best]
+        return ctx, radiance
+

@@ -1,0 +1,91 @@
+"""Thin faces: the faces of a mesh the images resolve that no pure pixel covers (a teapot's rim
+and spout, slivers of a scan), observed through their unmixed footprints
+(:attr:`estimator.pipeline.observations.Observations.thin`). Their radiance carries the
+unmixing's error (a face a third of a pixel wide mixes its neighbours' colours in every pixel
+it touches), so they take no part in what the faces determine together (the light, the sun,
+the regions, the coat): the estimate is made without their rows, and they join its uniform
+regions under its light (:meth:`.method.RetinexSegmented.solve_held`)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ...core.reductions import group_quantile
+from ...pipeline.observations import Observations
+from ...solvers.segmentation import albedo_features
+from .shading import in_unit_dc
+from .values import FitContext, Hypothesis
+
+# rounds of joining: a thin face whose neighbours are thin too joins once they have (a strip
+# of slivers along a rim is a few faces deep); a bound on the cost, not a threshold
+MAX_ROUNDS = 8
+
+
+def thin_faces(obs: Observations) -> np.ndarray | None:
+    """(F,) bool the thin faces with rows in ``obs`` (:attr:`Observations.thin`); None where
+    there is none, or where no other face has a row (they are then all the fit has)."""
+    if obs.thin is None:
+        return None
+    rows = obs.observed_faces()
+    thin = obs.thin & rows
+    return thin if thin.any() and (rows & ~thin).any() else None
+
+
+def with_thin_faces(ctx: FitContext, h: Hypothesis, thin: np.ndarray) -> Hypothesis:
+    """``h`` with the ``thin`` faces (F,) bool (left out of the fit, their radiance in
+    ``h.radiance``) joined to its uniform regions: a thin face lit under ``h``'s light (its
+    shading above the level :func:`.shading.divide_shade` takes over the fit's faces) joins
+    the region that every one of its lit neighbours lies in (a texture's face counts as one
+    more region) when that region is also the nearest to its own albedo, within the reach
+    :func:`estimator.solvers.segmentation.assign_to_regions` gives a face near a region in
+    albedo, and takes that region's albedo; joined faces count as lit neighbours in the next
+    of :data:`MAX_ROUNDS` rounds.
+    Both conditions, not one: a sliver along the border of two regions has neighbours in both
+    and a colour between them, and a strip of slivers across a border would carry a region
+    over it round by round. A thin face that joins no region, or a hypothesis without regions
+    (a texture), leaves it without an albedo: its own, unmixed from pixels its neighbours
+    share, scored 1-3 dB below the fitted faces on the textured development seeds. The fit's
+    own faces keep their albedos, labels and lit flags."""
+    if not thin.any() or not h.regions:
+        return h
+    shade = h.shading.columns @ h.light + ctx.extra
+    level = max(float(np.percentile(shade.mean(axis=1)[ctx.usable], 95)), 1e-30)
+    joining = thin & ~h.lit & np.all(shade > 0, axis=1) & (shade.mean(axis=1) > 0.02 * level) \
+        & np.all(np.isfinite(h.radiance) & (h.radiance > 0), axis=1)
+    if not joining.any():
+        return h
+    member = h.lit & (h.labels >= 0)
+    region_albedo = group_quantile(h.labels[member], h.albedo[member], h.regions, 0.5, interpolate=True)
+    own = h.radiance[joining] / shade[joining]
+    distance = np.max(np.abs(albedo_features(in_unit_dc(own, h.light))[:, None]
+                             - albedo_features(in_unit_dc(region_albedo, h.light))[None]), axis=2)   # (J, R)
+    nearest = np.full(len(thin), -1)
+    nearest[joining] = np.where(distance.min(axis=1) < 2.5 * ctx.config.segment_threshold,
+                                np.argmin(distance, axis=1), -1)
+    labelled = np.where(h.lit, np.where(h.labels >= 0, h.labels, h.regions), -1)
+    a, b = ctx.edges[:, 0], ctx.edges[:, 1]
+    for _ in range(MAX_ROUNDS):
+        region = unanimous_neighbour(labelled, a, b, h.regions)
+        new = joining & (labelled < 0) & (region >= 0) & (region < h.regions) & (nearest == region)
+        if not new.any():
+            break
+        labelled[new] = region[new]
+    tied = joining & (labelled >= 0) & (labelled < h.regions)
+    labels, albedo = h.labels.copy(), h.albedo.copy()
+    labels[tied] = labelled[tied]
+    albedo[tied] = region_albedo[labelled[tied]]
+    return replace(h, albedo=albedo, lit=h.lit | tied, labels=labels)
+
+
+def unanimous_neighbour(labels: np.ndarray, a: np.ndarray, b: np.ndarray, regions: int) -> np.ndarray:
+    """(F,) the label every labelled neighbour of a face has (``labels`` (F,) in [0, regions],
+    -1: none; edges ``a``, ``b`` (E,)), or -1 where its labelled neighbours disagree or it has
+    none."""
+    low = np.full(len(labels), regions + 1, dtype=np.int64)
+    high = np.full(len(labels), -1, dtype=np.int64)
+    for i, j in ((a, b), (b, a)):
+        known = labels[j] >= 0
+        np.minimum.at(low, i[known], labels[j[known]])
+        np.maximum.at(high, i[known], labels[j[known]])
+    return np.where(low == high, high, -1)

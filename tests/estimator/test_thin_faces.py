@@ -1,0 +1,98 @@
+"""Thin faces: on a mesh the images resolve, the faces no pure pixel covers are observed through
+their unmixed footprints (``Observations.thin``) and join the default's estimate under its light
+(``estimator.methods.retinex_segmented.thin``)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator import estimate
+from estimator.core.camera import Camera, look_at
+from estimator.core.data import View
+from estimator.methods.retinex_segmented.thin import unanimous_neighbour
+from estimator.pipeline.observations import gather_observations
+from estimator.rays.raycast import RayCaster
+
+from .meshes import sphere, with_slivers
+from .micro import micro_config, micro_scene
+
+
+def test_slivers_on_a_resolved_mesh_are_observed_through_their_footprints():
+    """A sphere of 320 faces seen at 64 px (faces of tens of pixels) with 40 faces split so that
+    a sliver of about 1.5 % of their area runs along an edge; every face a random colour and
+    each pixel the mean of 8 x 8 sub-pixel rays (a box filter). The mesh is resolved (no face
+    ``unresolved``); the slivers with rows are thin, and their rows come back within 10 % of
+    their own colour at the median (a neighbour of another random colour shares each of their
+    pixels). Without sub-pixel samples nothing unmixes them: they have no row, none is thin."""
+    rng = np.random.default_rng(3)
+    mesh, slivers = with_slivers(sphere(2), rng.choice(320, 40, replace=False))
+    caster = RayCaster(mesh)
+    colour = rng.uniform(0.1, 1.0, size=(mesh.num_faces, 3))
+    eyes = [[0, 0, 4], [0.3, 0.2, 4], [-0.2, 0.35, 4], [0.15, -0.3, 4], [4, 0, 0.5], [0, 4, 0.3], [-4, 0.5, 0],
+            [0, -4, 0.5]]
+    views = []
+    for i, eye in enumerate(eyes):
+        cam = Camera.from_fov(look_at(eye, [0, 0, 0]), 30, 64, 64)
+        fine = caster.subpixel_faces(cam, 8, np.arange(64 * 64))
+        image = np.where(fine[..., None] >= 0, colour[np.maximum(fine, 0)], 0.0).mean(axis=1)
+        views.append(View(f"v{i}", cam, image.reshape(64, 64, 3).astype(np.float32)))
+    obs = gather_observations(caster, views)
+    rows = np.bincount(obs.face, minlength=mesh.num_faces) > 0
+    assert obs.unresolved is None and obs.thin is not None
+    assert rows[slivers].sum() >= 20 and np.all(obs.thin[slivers[rows[slivers]]])
+    thin_rows = obs.thin[obs.face]
+    assert np.median(np.abs(obs.rgb[thin_rows] / colour[obs.face[thin_rows]] - 1)) < 0.10
+    centres = gather_observations(caster, views, subpixel_samples=1)
+    assert centres.thin is None and not np.any(np.isin(centres.face, slivers))
+
+
+@pytest.fixture(scope="module")
+def slivered_micro():
+    """The micro scene (two uniform regions, matte) at 64 px with slivers in 12 faces whose
+    neighbours all lie in their region and in 3 faces along the regions' border, the sliver on
+    the border edge; the default's estimate of it."""
+    base = sphere(2)
+    top = base.centroids[:, 1] > 0.2
+    pairs = base.face_adjacency
+    mixed = np.zeros(base.num_faces, bool)
+    mixed[pairs[top[pairs[:, 0]] != top[pairs[:, 1]]].ravel()] = True
+    # the face across each face's first edge (a, b), along which its sliver runs
+    across = np.full(base.num_faces, -1)
+    for p, q in ((pairs[:, 0], pairs[:, 1]), (pairs[:, 1], pairs[:, 0])):
+        first = base.faces[p][:, :2]
+        on = np.all(np.any(first[:, :, None] == base.faces[q][:, None, :], axis=2), axis=1)
+        across[p[on]] = q[on]
+    rng = np.random.default_rng(0)
+    inside = rng.choice(np.nonzero(~mixed)[0], 12, replace=False)
+    border = np.nonzero(top != top[across])[0][:3]
+    mesh, slivers = with_slivers(base, np.concatenate([inside, border]))
+    config = micro_config()
+    data, truth = micro_scene(config, specular=0.0, mesh=mesh, size=64)
+    return estimate(data, "retinex-segmented", config), truth, slivers[:12], slivers[12:]
+
+
+def test_thin_faces_inside_a_region_take_its_albedo_and_those_on_its_border_none(slivered_micro):
+    """The slivers inside a region that have rows join it with its albedo (its faces' own, to
+    1e-4 after the gauge, as every estimated face); a sliver along the border of two regions
+    (its neighbours in both) is left out: its pixels mix the two albedos."""
+    est, truth, inside, border = slivered_micro
+    assert est.info["uniform_regions"] == 2 and est.info["unresolved_faces"] == 0
+    joined = inside[est.observed[inside]]
+    assert len(joined) >= 4
+    o = est.observed
+    gauge = np.sum(truth.diffuse[o] * est.diffuse[o], 0) / np.sum(est.diffuse[o] ** 2, 0)
+    np.testing.assert_allclose(est.diffuse[o] * gauge, truth.diffuse[o], rtol=1e-4)
+    top = est.labels[np.argmax(truth.diffuse[:, 0])]
+    for face in joined:
+        region = est.labels == est.labels[face]
+        assert region.sum() > 100 and est.labels[face] == (top if truth.diffuse[face, 0] > 0.5 else 1 - top)
+    assert not est.observed[border].any()
+
+
+def test_a_face_joins_the_region_all_its_labelled_neighbours_share():
+    """Faces 0-4 in a chain 0-1-2-3-4 (edges (0, 1), (1, 2), (2, 3), (3, 4)): face 1 between
+    regions 0 and 1 has none, face 3 between region 1 and an unlabelled face takes 1, a face
+    without a labelled neighbour none."""
+    labels = np.array([0, -1, 1, -1, -1])
+    a, b = np.array([0, 1, 2, 3]), np.array([1, 2, 3, 4])
+    np.testing.assert_array_equal(unanimous_neighbour(labels, a, b, 2), [-1, -1, -1, 1, -1])
