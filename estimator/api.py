@@ -245,6 +245,8 @@ def _fit(data: MultiViewData, cls, config: EstimatorConfig, known_sh, known_radi
     ``prior``: an estimate of the same scene from other views, where the method may start."""
     prep = prepare(data, config, log, cls.name, cls.streams, caster,
                    ", ".join(sorted(name for name, kind in REGISTRY.items() if kind.streams)))
+    if prep.all_obs.thin is not None and not cls.joins_thin_faces:
+        prep = prep.without_thin()
     gains = None
     if config.view_gains:
         gains = exposure.view_gains(prep.obs)

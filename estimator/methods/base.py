@@ -44,6 +44,10 @@ class Method(ABC):
     needs_illumination: ClassVar[bool] = False
     default_loss: ClassVar[str] = "none"
     streams: ClassVar[bool] = False   # solve() accepts a streamed problem (Prepared.streamed)
+    # solve() takes the rows of thin faces (Observations.thin: unmixed from pixels they share)
+    # and decides what they may determine; for the other methods they are dropped before the
+    # solve, so those see a resolved mesh's faces as they always have
+    joins_thin_faces: ClassVar[bool] = False
     # info["residuals"] holds the relative residual after each step, the last the final fit's:
     # what the Phong exponent is selected by (tests/estimator/test_method_contract.py checks it)
     reports_residual: ClassVar[bool] = True

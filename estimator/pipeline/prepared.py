@@ -188,6 +188,15 @@ class Prepared:
         return replace(self, obs=replace(self.obs.subset(keep), thin=None),
                        d_rows=None if self.d_rows is None else self.d_rows[keep], timings=dict(self.timings))
 
+    def without_thin(self) -> "Prepared":
+        """The problem without the rows of the thin faces (:attr:`Observations.thin`), kept or
+        not, as if no pixel had unmixed them."""
+        thin = self.all_obs.thin
+        if thin is None:
+            return self
+        kept = self.row_subset(~thin[self.obs.face])
+        return replace(kept, all_obs=replace(self.all_obs.subset(~thin[self.all_obs.face]), thin=None))
+
     def clustered(self, cluster: np.ndarray, representative: np.ndarray) -> "Prepared":
         """The problem on clusters of faces, its rows held, as if each cluster were one face:
         cluster k has one observation per view, the area-weighted mean of its faces' there

@@ -68,14 +68,14 @@ def slivered_micro():
     mesh, slivers = with_slivers(base, np.concatenate([inside, border]))
     config = micro_config()
     data, truth = micro_scene(config, specular=0.0, mesh=mesh, size=64)
-    return estimate(data, "retinex-segmented", config), truth, slivers[:12], slivers[12:]
+    return estimate(data, "retinex-segmented", config), truth, slivers[:12], slivers[12:], data
 
 
 def test_thin_faces_inside_a_region_take_its_albedo_and_those_on_its_border_none(slivered_micro):
     """The slivers inside a region that have rows join it with its albedo (its faces' own, to
     1e-4 after the gauge, as every estimated face); a sliver along the border of two regions
     (its neighbours in both) is left out: its pixels mix the two albedos."""
-    est, truth, inside, border = slivered_micro
+    est, truth, inside, border, _ = slivered_micro
     assert est.info["uniform_regions"] == 2 and est.info["unresolved_faces"] == 0
     joined = inside[est.observed[inside]]
     assert len(joined) >= 4
@@ -87,6 +87,18 @@ def test_thin_faces_inside_a_region_take_its_albedo_and_those_on_its_border_none
         region = est.labels == est.labels[face]
         assert region.sum() > 100 and est.labels[face] == (top if truth.diffuse[face, 0] > 0.5 else 1 - top)
     assert not est.observed[border].any()
+
+
+def test_methods_that_do_not_join_thin_faces_never_see_their_rows(slivered_micro):
+    """The other methods solve every face with rows as its own (or its cluster's): the thin
+    faces' rows are dropped before their solve, so a per-face method estimates none of the
+    slivers the default joined, and its estimate is the one it makes of the mesh without them."""
+    est, _, inside, _, data = slivered_micro
+    joined = inside[est.observed[inside]]
+    config = micro_config()
+    per_face = estimate(data, "median-color", config)
+    assert len(joined) and not per_face.observed[joined].any()
+    assert per_face.info["observations_all"] < est.info["observations_all"]
 
 
 def test_a_face_joins_the_region_all_its_labelled_neighbours_share():

@@ -134,6 +134,7 @@ class RetinexSegmented(Method):
     name = "retinex-segmented"
     default_loss = "cauchy"
     streams = True
+    joins_thin_faces = True   # left out of the fit, joined to its regions (:mod:`.thin`)
 
     def solve(self, prep):
         c = self.config
