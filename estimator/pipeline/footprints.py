@@ -146,5 +146,5 @@ def radiance_error(fp: Footprints, radiance: np.ndarray) -> np.ndarray:
     residual = fp.rgb - w @ radiance
     noise = 1.4826 * np.median(np.abs(residual), axis=0)
     information = np.asarray(w.power(2).sum(axis=0)).ravel()
-    with np.errstate(divide="ignore", invalid="ignore"):   # a channel black in every pixel: 0 / 0
+    with np.errstate(divide="ignore", invalid="ignore"):   # a face in no pixel: inf (0 / 0 in a black channel)
         return np.where(information[:, None] > 0, noise[None, :] / np.sqrt(information)[:, None], np.inf)

@@ -82,8 +82,8 @@ class Observations:
         (the share of sub-pixel rays it takes, summed over its pixels; with one sub-pixel
         sample, its pixel centres); None when no face is unresolved.
     rowless_views : (K,) int64 views that show the mesh but give no row: no face covers
-        ``min_pixels`` of their pixels whole, and the images resolve the faces elsewhere, so no
-        face is observed through its footprint (:func:`gather_observations`; empty for
+        ``min_pixels`` of their pixels whole, the images resolve the faces elsewhere, and no
+        thin face is unmixed from their pixels (:func:`gather_observations`; empty for
         observations made otherwise, e.g. merged into clusters).
     radiance_se : (num_faces, 3) float64 the standard error of each unresolved or thin face's
         radiance unmixed from the pixels it shares (:func:`.footprints.radiance_error`), 0 for the other
@@ -234,10 +234,12 @@ def _unmixed_rows(caster: RayCaster, views: list[View], usable: list[np.ndarray]
 def _around(faces: np.ndarray, mesh: TriangleMesh, usable: list[np.ndarray],
             centre_ids: list[np.ndarray]) -> list[np.ndarray]:
     """Per view, the ``usable`` pixels (H*W,) bool whose centre ray hits one of ``faces`` (F,)
-    bool or a face beside one: every pixel a face smaller than a pixel shares with its
-    neighbours, with the neighbours' own pixels that settle their radiance. On a mesh the
-    images resolve, the thin faces are unmixed from these alone (sub-pixel rays over every
-    pixel cost a second on a 5k-face teapot)."""
+    bool or a face that shares an edge with one: the pixels about those faces, with their
+    neighbours' own pixels that settle the neighbours' radiance. On a mesh the images
+    resolve, the thin faces are unmixed from these alone (sub-pixel rays over every pixel cost
+    a second on a 5k-face teapot); a pixel that covers a thin face but whose centre hits a
+    face beyond them (one sharing only a vertex, or a nearer part of the object) is left out,
+    and the face is unmixed from the others."""
     near = faces.copy()
     pairs = mesh.face_adjacency
     near[pairs[faces[pairs[:, 1]], 0]] = True
@@ -278,8 +280,9 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     samples they stay unobserved rather than take a neighbour's colour. A
     view in which no face covers ``min_pixels`` pixels whole (a camera far from the object
     among nearer ones) gives no row: it is named (``rowless_views``), not refused. The
-    pixels' equations are held in memory: beyond ``max_pixels`` usable pixels (None: no
-    bound) the faces are observed through their pixel centres instead.
+    pixels' equations are held in memory: beyond ``max_pixels`` pixels to unmix (None: no
+    bound) the faces of a dense mesh are observed through their pixel centres instead, and
+    the thin faces of a resolved one not at all.
     Pixels with coverage ``alpha < min_alpha``
     (silhouette edges) are skipped, and faces covered by fewer than
     ``min_pixels`` usable pixels in a view give no row. Pixels with a channel below
@@ -326,12 +329,12 @@ def gather_observations(caster: RayCaster, views: list[View], min_pixels: int = 
     # on a mesh the images resolve, the faces no pure pixel covers (thin faces) are unmixed
     # from the pixels about them, or not observed where nothing unmixes them: a pixel centre's
     # colour would mix a neighbour's albedo into theirs
-    pixels = _around(hit & ~covered, mesh, usable, centre_ids) if resolves else usable
+    unmixed_pixels = _around(hit & ~covered, mesh, usable, centre_ids) if resolves else usable
     unmixing = pure_pixels and subpixel_samples > 1 and (max_pixels is None
-                                                         or sum(int(p.sum()) for p in pixels) <= max_pixels)
+                                                         or sum(int(p.sum()) for p in unmixed_pixels) <= max_pixels)
     footprint = ~covered if not resolves else hit & ~covered if unmixing else np.zeros(f, dtype=bool)
     parts, footprint_pixels = [], 0
-    unmixed = _unmixed_rows(caster, views, pixels, centre_ids, footprint, subpixel_samples, min_pixels) \
+    unmixed = _unmixed_rows(caster, views, unmixed_pixels, centre_ids, footprint, subpixel_samples, min_pixels) \
         if unmixing and footprint.any() else None
     for index, (view, ids, valid, row) in enumerate(zip(views, centre_ids, usable, pure_rows)):
         if footprint.any():   # the footprint rows, and the pure rows (none without pure_pixels)

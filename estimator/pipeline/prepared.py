@@ -177,7 +177,7 @@ class Prepared:
         mapping[faces] = np.arange(len(faces))
         keep = mapping[self.obs.face] >= 0
         sub = self.obs.subset(keep)
-        return replace(self, obs=replace(sub, face=mapping[sub.face], num_faces=len(faces)),
+        return replace(self, obs=replace(sub, face=mapping[sub.face], num_faces=len(faces), thin=None),
                        c_matrix=self.diffuse_rows(faces), d_rows=self.specular_rows(np.nonzero(keep)[0]),
                        timings=dict(self.timings))
 

@@ -9,8 +9,8 @@ import pytest
 from estimator import estimate
 from estimator.core.camera import Camera, look_at
 from estimator.core.data import View
-from estimator.methods.retinex_segmented.thin import unanimous_neighbour
-from estimator.pipeline.observations import gather_observations
+from estimator.methods.retinex_segmented.thin import thin_faces, unanimous_neighbour
+from estimator.pipeline.observations import Observations, gather_observations
 from estimator.rays.raycast import RayCaster
 
 from .meshes import sphere, with_slivers
@@ -89,6 +89,20 @@ def test_thin_faces_inside_a_region_take_its_albedo_and_those_on_its_border_none
     assert not est.observed[border].any()
 
 
+def test_the_other_faces_and_the_light_are_those_of_a_run_without_thin_rows(slivered_micro):
+    """Without sub-pixel samples nothing unmixes the slivers, so they have no rows: that
+    run's light and its albedo of every face both runs estimate are the default's (the thin
+    faces' rows take no part in the fit); the default's count of thin faces is recorded."""
+    est, _, inside, _, data = slivered_micro
+    plain = estimate(data, "retinex-segmented", micro_config(subpixel_samples=1))
+    assert "thin_faces" not in plain.info and est.info["thin_faces"]["joined"] == int(
+        est.observed.sum() - np.sum(est.observed & plain.observed))
+    np.testing.assert_allclose(est.pseudo_sh, plain.pseudo_sh, rtol=1e-9, atol=1e-12)
+    both = est.observed & plain.observed
+    assert both.sum() > 250 and not plain.observed[inside].any()
+    np.testing.assert_allclose(est.diffuse[both], plain.diffuse[both], rtol=1e-9)
+
+
 def test_methods_that_do_not_join_thin_faces_never_see_their_rows(slivered_micro):
     """The other methods solve every face with rows as its own (or its cluster's): the thin
     faces' rows are dropped before their solve, so a per-face method estimates none of the
@@ -108,3 +122,15 @@ def test_a_face_joins_the_region_all_its_labelled_neighbours_share():
     labels = np.array([0, -1, 1, -1, -1])
     a, b = np.array([0, 1, 2, 3]), np.array([1, 2, 3, 4])
     np.testing.assert_array_equal(unanimous_neighbour(labels, a, b, 2), [-1, -1, -1, 1, -1])
+
+
+def test_thin_faces_are_those_with_rows_unless_no_other_face_has_one():
+    """Faces 0-3, rows of faces 0, 1 and 2: with 1 and 3 thin, face 1 is (3 has no row); with
+    0, 1 and 2 thin there is no other face to fit, so none is set apart (None); without a
+    thin face, None."""
+    def rows(thin):
+        face = np.array([0, 0, 1, 2])
+        return Observations(face, np.ones((4, 3)), np.tile([0.0, 0.0, 1.0], (4, 1)), 4, 2, thin=thin)
+    np.testing.assert_array_equal(thin_faces(rows(np.array([False, True, False, True]))), [False, True, False, False])
+    assert thin_faces(rows(np.array([True, True, True, False]))) is None
+    assert thin_faces(rows(None)) is None

@@ -126,9 +126,13 @@ class RetinexSegmented(Method):
     one that best predicts the observations, at the Bayesian information criterion's price
     per unknown, is kept (:mod:`.decision`); step 6 is skipped when it models the coat.
 
+    7. Thin faces (:mod:`.thin`: no pure pixel covers them; their rows are unmixed from
+       pixels they share) take no part in steps 1-6 and then join the estimate's uniform
+       regions where their neighbours and their own albedo agree.
+
     On a mesh with more observed faces than ``light_faces`` (a dense scan), or whose rows are
     streamed, steps 1-6 run on that many clusters of faces and every face's albedo follows
-    under their light (:mod:`.clusters`).
+    under their light (:mod:`.clusters`); thin faces then have no rows.
     """
 
     name = "retinex-segmented"
@@ -141,10 +145,12 @@ class RetinexSegmented(Method):
         if c.components == "specular":
             raise InputError("retinex-segmented estimates the diffuse albedo from shading; for specular-only "
                              "data (components='specular') use bilinear-per-face")
-        observed = np.nonzero(prep.obs.observed_faces())[0]
+        thin = thin_faces(prep.obs)
+        observed = np.nonzero(prep.obs.observed_faces() & (True if thin is None else ~thin))[0]
         count = cluster_count(prep, c.light_faces, len(observed))
         if prep.streamed or (count < len(observed) and not carried(c)):
-            return solve_on_clusters(self, prep, observed, count)
+            # a cluster would merge a thin face's rows into its colour: on clusters they have none
+            return solve_on_clusters(self, prep.without_thin(), observed, count)
         return self.solve_held(prep).estimate
 
     def solve_held(self, prep, keep_regions: bool = True) -> Solution:
@@ -250,9 +256,12 @@ class RetinexSegmented(Method):
         estimate came from): their radiance is the same quantile as every face's, over their
         rows of ``whole`` less the coat's ``level`` and ``applied`` reflection (a thin face is
         in no region of the first fit, so in the last coat group). The fitted faces keep every
-        value, and the estimate its record of its choices; where none joins (a texture: no
-        region) it is returned as it is."""
-        if not chosen.regions:
+        value, and the estimate its record of its choices, with the thin faces counted
+        (``info['thin_faces']``: those with rows and those joined); where none joins (a
+        texture, or a light from the coat's map or lobe) it is returned as it is."""
+        if not chosen.regions or chosen.source.models_the_coat:
+            # a light from the coat's view changes divides the map's or the lobe's diffuse
+            # radiance, which the thin faces' colours less a level alone do not match
             return est
         c, obs = self.config, whole.obs.subset(thin[whole.obs.face])
         rgb = obs.rgb - level
@@ -264,10 +273,12 @@ class RetinexSegmented(Method):
         ctx, _ = self._context(fitted, fits)
         joined = with_thin_faces(ctx, replace(chosen, radiance=np.where(thin[:, None], radiance, chosen.radiance)),
                                  thin & (fitted.c_matrix[:, 0] > 0))
-        if np.array_equal(joined.lit, chosen.lit):
+        count = {"with_rows": int(thin.sum()), "joined": int(np.sum(joined.lit & ~chosen.lit))}
+        if not count["joined"]:
+            est.info["thin_faces"] = count
             return est
         out = to_estimate(ctx, joined, self)
-        out.info = {**est.info, **out.info}
+        out.info = {**est.info, **out.info, "thin_faces": count}
         return out
 
     def _coat_candidates(self, prep, est: Estimate) -> list[tuple[CoatReflection, np.ndarray]]:

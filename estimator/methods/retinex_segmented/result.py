@@ -44,8 +44,7 @@ def to_estimate(ctx: FitContext, h: Hypothesis, method) -> Estimate:
     # (N, 3) projections instead of (N, M) rows
     result = method._solve_groups(prep.projected(light), group, groups, np.eye(3))
     specular = np.zeros((f, 3))
-    # without regions, the per-face fits of faces with rows (a thin face joined without rows has none)
-    reference = result.specular[:regions] if regions else result.specular[group[h.lit & prep.obs.observed_faces()]]
+    reference = result.specular[:regions] if regions else result.specular[group[h.lit]]
     specular[:] = np.median(reference, axis=0) if len(reference) else 0.0
     specular[labels >= 0] = result.specular[labels[labels >= 0]]
     observed = h.lit & np.all(np.isfinite(albedo), axis=1)

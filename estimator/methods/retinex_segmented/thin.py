@@ -61,6 +61,7 @@ def with_thin_faces(ctx: FitContext, h: Hypothesis, thin: np.ndarray) -> Hypothe
     distance = np.max(np.abs(albedo_features(in_unit_dc(own, h.light))[:, None]
                              - albedo_features(in_unit_dc(region_albedo, h.light))[None]), axis=2)   # (J, R)
     nearest = np.full(len(thin), -1)
+    distance = np.nan_to_num(distance, nan=np.inf)   # a region with no lit face has no centre
     nearest[joining] = np.where(distance.min(axis=1) < 2.5 * ctx.config.segment_threshold,
                                 np.argmin(distance, axis=1), -1)
     labelled = np.where(h.lit, np.where(h.labels >= 0, h.labels, h.regions), -1)
