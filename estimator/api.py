@@ -248,8 +248,8 @@ def _fit(data: MultiViewData, cls, config: EstimatorConfig, known_sh, known_radi
     if prep.all_obs.thin is not None and not cls.joins_thin_faces:
         prep = prep.without_thin()
     gains = None
-    if config.view_gains:
-        gains = exposure.view_gains(prep.obs)
+    if config.view_gains:   # from the rows the fit takes: not a thin face's, unmixed from shared pixels
+        gains = exposure.view_gains(prep.without_thin().obs)
         prep = exposure.divide_gains(prep, gains)
         if log:
             log(f"view gains: {gains.min():.3f} to {gains.max():.3f} over the views and channels")

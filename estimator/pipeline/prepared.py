@@ -30,9 +30,10 @@ class StreamingConfig(Section):
     dense_rows : faces plus kept observations above which the reflection rows (float64, M
         wide) are not held in memory but computed in chunks when needed (:class:`Prepared`);
         1.5 M rows hold at most 1.4 GiB. Only methods with ``streams`` accept such a problem.
-        On a mesh denser than its photos it also bounds the usable pixels whose equations in
-        the faces they cover are held (:mod:`.footprints`); beyond it, faces are observed
-        through their pixel centres.
+        It also bounds the pixels whose equations in the faces they cover are held
+        (:mod:`.footprints`): beyond it, the faces of a mesh denser than its photos are
+        observed through their pixel centres, and the thin faces of a resolved one
+        (:attr:`.observations.Observations.thin`) not at all.
     light_faces : a streamed solve finds the light from the observations of this many
         observed faces, then every face's albedos with the light fixed: 121 light
         coefficients are determined many times over by 20,000 faces. The per-face methods
@@ -190,9 +191,10 @@ class Prepared:
 
     def without_thin(self) -> "Prepared":
         """The problem without the rows of the thin faces (:attr:`Observations.thin`), kept or
-        not, as if no pixel had unmixed them."""
+        not, as if no pixel had unmixed them; as it is where no other face has a kept row
+        (they are then all there is to solve from)."""
         thin = self.all_obs.thin
-        if thin is None:
+        if thin is None or not np.any(~thin[self.obs.face]):
             return self
         kept = self.row_subset(~thin[self.obs.face])
         return replace(kept, all_obs=replace(self.all_obs.subset(~thin[self.all_obs.face]), thin=None))

@@ -20,7 +20,7 @@ from .clusters import carried, cluster_count, solve_on_clusters
 from .decision import choose, light_hypotheses, prediction_cost
 from .level import coat_level
 from .result import to_estimate
-from .thin import thin_faces, with_thin_faces
+from .thin import joined_to_regions, thin_faces
 from .values import CoatReflection, FitContext, Hypothesis, LightSource, ReflectionFits, Solution
 
 
@@ -126,9 +126,10 @@ class RetinexSegmented(Method):
     one that best predicts the observations, at the Bayesian information criterion's price
     per unknown, is kept (:mod:`.decision`); step 6 is skipped when it models the coat.
 
-    7. Thin faces (:mod:`.thin`: no pure pixel covers them; their rows are unmixed from
-       pixels they share) take no part in steps 1-6 and then join the estimate's uniform
-       regions where their neighbours and their own albedo agree.
+    7. The faces steps 1-6 had no row of (:mod:`.thin`: thin faces, which no pure pixel
+       covers, their rows unmixed from pixels they share; faces seen only beyond
+       ``min_cos_view``) join the estimate's uniform regions where their neighbours and their
+       own albedo agree.
 
     On a mesh with more observed faces than ``light_faces`` (a dense scan), or whose rows are
     streamed, steps 1-6 run on that many clusters of faces and every face's albedo follows
@@ -179,8 +180,11 @@ class RetinexSegmented(Method):
             est, chosen, applied, prep = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
             if applied is not None:
                 weight = applied.weight
-        if thin is not None:
-            est = self._with_thin(whole, prep, fits, est, chosen, applied, level, thin)
+        # the faces a view shows that the fit had no row of: thin faces, and faces seen only
+        # beyond min_cos_view (their rows kept out of every fit)
+        outside = whole.all_obs.observed_faces() & ~prep.obs.observed_faces()
+        if outside.any() and not whole.merged_faces:   # clusters: extend() finds every face's albedo
+            est = self._with_outside(whole, prep, fits, est, chosen, applied, level, outside)
         est.info["coat_level"] = level.tolist()
         est.info["coat_degree"] = None if applied is None else applied.order
         est.info["coat_exponent"] = None if applied is None else applied.exponent
@@ -248,37 +252,44 @@ class RetinexSegmented(Method):
         est.info["coat_costs"] = named
         return est, chosen, applied, prep
 
-    def _with_thin(self, whole: Prepared, fitted: Prepared, fits: ReflectionFits, est: Estimate,
-                   chosen: Hypothesis, applied: CoatReflection | None, level: np.ndarray,
-                   thin: np.ndarray) -> Estimate:
-        """``est`` with the ``thin`` faces (F,) bool (:mod:`.thin`) joined to its regions under
-        its light (:func:`.thin.with_thin_faces`, in the context of the problem ``fitted`` the
-        estimate came from): their radiance is the same quantile as every face's, over their
-        rows of ``whole`` less the coat's ``level`` and ``applied`` reflection (a thin face is
-        in no region of the first fit, so in the last coat group). The fitted faces keep every
-        value, and the estimate its record of its choices, with the thin faces counted
-        (``info['thin_faces']``: those with rows and those joined); where none joins (a
-        texture, or a light from the coat's map or lobe) it is returned as it is."""
+    def _with_outside(self, whole: Prepared, fitted: Prepared, fits: ReflectionFits, est: Estimate,
+                      chosen: Hypothesis, applied: CoatReflection | None, level: np.ndarray,
+                      outside: np.ndarray) -> Estimate:
+        """``est`` with the faces ``outside`` (F,) bool the fit had no row of (thin faces, and
+        faces seen only beyond ``min_cos_view``) joined to its regions under its light
+        (:func:`.thin.joined_to_regions`, in the context of the problem ``fitted`` the estimate
+        came from). A face's radiance is the same quantile as every face's, over its kept rows
+        of ``whole`` (a thin face's), or all its rows where none is kept, less the coat's
+        ``level`` and ``applied`` reflection (such a face is in no region of the first fit, so
+        in the last coat group). The fitted faces keep every value, and the estimate its record
+        of its choices, with the faces counted (``info['outside_faces']``: thin, seen only at
+        grazing angles, and joined); where none joins (a texture, or a light from the coat's
+        map or lobe) the estimate is returned as it is."""
+        kept = whole.obs.observed_faces()
+        count = {"thin": int(np.sum(outside & kept)), "grazing": int(np.sum(outside & ~kept)), "joined": 0}
+        est.info["outside_faces"] = count
         if not chosen.regions or chosen.source.models_the_coat:
             # a light from the coat's view changes divides the map's or the lobe's diffuse
-            # radiance, which the thin faces' colours less a level alone do not match
+            # radiance, which these faces' colours less a level alone do not match
             return est
-        c, obs = self.config, whole.obs.subset(thin[whole.obs.face])
-        rgb = obs.rgb - level
+        c = self.config
+        own, beyond = whole.obs.subset((outside & kept)[whole.obs.face]), whole.all_obs.subset(
+            (outside & ~kept)[whole.all_obs.face])
+        face, view_dir = np.concatenate([own.face, beyond.face]), np.concatenate([own.view_dir, beyond.view_dir])
+        rgb = np.concatenate([own.rgb, beyond.rgb]) - level
         if applied is not None:
-            normals = whole.data.mesh.face_normals[obs.face]
-            escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, whole.sampling, whole.visibility)
-            rgb = rgb - applied.weight[-1] * applied.rows(normals, obs.view_dir, c.coat_ior, escapes)
-        radiance = group_quantile(obs.face, rgb, obs.num_faces, c.retinex_quantile)
+            normals = whole.data.mesh.face_normals[face]
+            escapes = coat.mirror_escapes(face, normals, view_dir, whole.sampling, whole.visibility)
+            rgb = rgb - applied.weight[-1] * applied.rows(normals, view_dir, c.coat_ior, escapes)
+        radiance = group_quantile(face, rgb, whole.obs.num_faces, c.retinex_quantile)
         ctx, _ = self._context(fitted, fits)
-        joined = with_thin_faces(ctx, replace(chosen, radiance=np.where(thin[:, None], radiance, chosen.radiance)),
-                                 thin & (fitted.c_matrix[:, 0] > 0))
-        count = {"with_rows": int(thin.sum()), "joined": int(np.sum(joined.lit & ~chosen.lit))}
+        joined = joined_to_regions(ctx, replace(chosen, radiance=np.where(outside[:, None], radiance, chosen.radiance)),
+                                   outside & (fitted.c_matrix[:, 0] > 0))
+        count["joined"] = int(np.sum(joined.lit & ~chosen.lit))
         if not count["joined"]:
-            est.info["thin_faces"] = count
             return est
         out = to_estimate(ctx, joined, self)
-        out.info = {**est.info, **out.info, "thin_faces": count}
+        out.info = {**est.info, **out.info}
         return out
 
     def _coat_candidates(self, prep, est: Estimate) -> list[tuple[CoatReflection, np.ndarray]]:

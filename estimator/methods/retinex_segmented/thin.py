@@ -1,10 +1,16 @@
-"""Thin faces: the faces of a mesh the images resolve that no pure pixel covers (a teapot's rim
-and spout, slivers of a scan), observed through their unmixed footprints
-(:attr:`estimator.pipeline.observations.Observations.thin`). Their radiance carries the
-unmixing's error (a face a third of a pixel wide mixes its neighbours' colours in every pixel
-it touches), so they take no part in what the faces determine together (the light, the sun,
-the regions, the coat): the estimate is made without their rows, and they join its uniform
-regions under its light (:meth:`.method.RetinexSegmented.solve_held`)."""
+"""Faces outside the fit, joined to its regions afterwards. Two kinds:
+
+* thin faces: the faces of a mesh the images resolve that no pure pixel covers (a teapot's
+  rim and spout, slivers of a scan, faces mostly hidden behind another part), observed
+  through their unmixed footprints (:attr:`estimator.pipeline.observations.Observations.thin`).
+  Their radiance carries the unmixing's error (a face a third of a pixel wide mixes its
+  neighbours' colours in every pixel it touches), so their rows take no part in what the
+  faces determine together (the light, the sun, the regions, the coat);
+* faces seen only beyond ``min_cos_view`` (a table-top camera's view of a bunny's flanks),
+  whose rows no fit keeps.
+
+The estimate is made without them, and they join its uniform regions under its light
+(:meth:`.method.RetinexSegmented.solve_held`)."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -17,8 +23,8 @@ from ...solvers.segmentation import albedo_features
 from .shading import in_unit_dc
 from .values import FitContext, Hypothesis
 
-# rounds of joining: a thin face whose neighbours are thin too joins once they have (a strip
-# of slivers along a rim is a few faces deep); a bound on the cost, not a threshold
+# rounds of joining: a face whose neighbours are outside the fit too joins once they have (a
+# strip of slivers along a rim is a few faces deep); a bound on the cost, not a threshold
 MAX_ROUNDS = 8
 
 
@@ -32,26 +38,25 @@ def thin_faces(obs: Observations) -> np.ndarray | None:
     return thin if thin.any() and (rows & ~thin).any() else None
 
 
-def with_thin_faces(ctx: FitContext, h: Hypothesis, thin: np.ndarray) -> Hypothesis:
-    """``h`` with the ``thin`` faces (F,) bool (left out of the fit, their radiance in
-    ``h.radiance``) joined to its uniform regions: a thin face lit under ``h``'s light (its
+def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray) -> Hypothesis:
+    """``h`` with the faces ``outside`` (F,) bool the fit left out (their radiance in
+    ``h.radiance``) joined to its uniform regions: such a face lit under ``h``'s light (its
     shading above the level :func:`.shading.divide_shade` takes over the fit's faces) joins
     the region that every one of its lit neighbours lies in (a texture's face counts as one
     more region) when that region is also the nearest to its own albedo, within the reach
     :func:`estimator.solvers.segmentation.assign_to_regions` gives a face near a region in
     albedo, and takes that region's albedo; joined faces count as lit neighbours in the next
-    of :data:`MAX_ROUNDS` rounds.
-    Both conditions, not one: a sliver along the border of two regions has neighbours in both
-    and a colour between them, and a strip of slivers across a border would carry a region
-    over it round by round. A thin face that joins no region, or a hypothesis without regions
-    (a texture), leaves it without an albedo: its own, unmixed from pixels its neighbours
-    share, scored 1-3 dB below the fitted faces on the textured development seeds. The fit's
-    own faces keep their albedos, labels and lit flags."""
-    if not thin.any() or not h.regions:
+    of :data:`MAX_ROUNDS` rounds. Both conditions, not one: a sliver along the border of two
+    regions has neighbours in both and a colour between them, and a strip of slivers across a
+    border would carry a region over it round by round. A face that joins no region, or a
+    hypothesis without regions (a texture), leaves it without an albedo: a thin face's own,
+    unmixed from pixels its neighbours share, scored 1-3 dB below the fitted faces on the
+    textured development seeds. The fit's own faces keep their albedos, labels and lit flags."""
+    if not outside.any() or not h.regions:
         return h
     shade = h.shading.columns @ h.light + ctx.extra
     level = max(float(np.percentile(shade.mean(axis=1)[ctx.usable], 95)), 1e-30)
-    joining = thin & ~h.lit & np.all(shade > 0, axis=1) & (shade.mean(axis=1) > 0.02 * level) \
+    joining = outside & ~h.lit & np.all(shade > 0, axis=1) & (shade.mean(axis=1) > 0.02 * level) \
         & np.all(np.isfinite(h.radiance) & (h.radiance > 0), axis=1)
     if not joining.any():
         return h
@@ -60,7 +65,7 @@ def with_thin_faces(ctx: FitContext, h: Hypothesis, thin: np.ndarray) -> Hypothe
     own = h.radiance[joining] / shade[joining]
     distance = np.max(np.abs(albedo_features(in_unit_dc(own, h.light))[:, None]
                              - albedo_features(in_unit_dc(region_albedo, h.light))[None]), axis=2)   # (J, R)
-    nearest = np.full(len(thin), -1)
+    nearest = np.full(len(outside), -1)
     distance = np.nan_to_num(distance, nan=np.inf)   # a region with no lit face has no centre
     nearest[joining] = np.where(distance.min(axis=1) < 2.5 * ctx.config.segment_threshold,
                                 np.argmin(distance, axis=1), -1)
