@@ -16,15 +16,21 @@ def divide(shading: Shading, radiance: np.ndarray, light: np.ndarray, usable: np
 
 
 def divide_shade(shade: np.ndarray, radiance: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(F, 3) ``radiance`` over ``shade`` (F, 3), and (F,) where that is an albedo: usable and
-    lit above 2 % of the 95th-percentile shading (a face in deep shadow divides noise by
-    nearly nothing)."""
-    lum = shade.mean(axis=1)
-    level = max(float(np.percentile(lum[usable], 95)), 1e-30)
-    lit = usable & np.all(shade > 0, axis=1) & (lum > 0.02 * level)
+    """(F, 3) ``radiance`` over ``shade`` (F, 3), and (F,) where that is an albedo: the usable
+    faces :func:`lit_faces` keeps."""
+    lit = lit_faces(shade, usable, usable)
     with np.errstate(divide="ignore", invalid="ignore"):
         albedo = np.where(lit[:, None], radiance / np.where(shade > 0, shade, 1.0), 0.0)
     return albedo, lit
+
+
+def lit_faces(shade: np.ndarray, usable: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool the ``faces`` lit above 2 % of the 95th-percentile shading of the ``usable``
+    faces (``shade`` (F, 3) positive in every channel): a face in deep shadow divides noise by
+    nearly nothing."""
+    lum = shade.mean(axis=1)
+    level = max(float(np.percentile(lum[usable], 95)), 1e-30)
+    return faces & np.all(shade > 0, axis=1) & (lum > 0.02 * level)
 
 
 def in_unit_dc(albedo: np.ndarray, light: np.ndarray) -> np.ndarray:

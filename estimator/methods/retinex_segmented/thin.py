@@ -20,7 +20,7 @@ import numpy as np
 from ...core.reductions import group_quantile
 from ...pipeline.observations import Observations
 from ...solvers.segmentation import albedo_features
-from .shading import in_unit_dc
+from .shading import in_unit_dc, lit_faces
 from .values import FitContext, Hypothesis
 
 # rounds of joining: a face whose neighbours are outside the fit too joins once they have (a
@@ -41,7 +41,7 @@ def thin_faces(obs: Observations) -> np.ndarray | None:
 def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray) -> Hypothesis:
     """``h`` with the faces ``outside`` (F,) bool the fit left out (their radiance in
     ``h.radiance``) joined to its uniform regions: such a face lit under ``h``'s light (its
-    shading above the level :func:`.shading.divide_shade` takes over the fit's faces) joins
+    shading above the level of the fit's faces, :func:`.shading.lit_faces`) joins
     the region that every one of its lit neighbours lies in (a texture's face counts as one
     more region) when that region is also the nearest to its own albedo, within the reach
     :func:`estimator.solvers.segmentation.assign_to_regions` gives a face near a region in
@@ -55,9 +55,8 @@ def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray) -> Hy
     if not outside.any() or not h.regions:
         return h
     shade = h.shading.columns @ h.light + ctx.extra
-    level = max(float(np.percentile(shade.mean(axis=1)[ctx.usable], 95)), 1e-30)
-    joining = outside & ~h.lit & np.all(shade > 0, axis=1) & (shade.mean(axis=1) > 0.02 * level) \
-        & np.all(np.isfinite(h.radiance) & (h.radiance > 0), axis=1)
+    positive = np.all(np.isfinite(h.radiance) & (h.radiance > 0), axis=1)
+    joining = lit_faces(shade, ctx.usable, outside & ~h.lit & positive)
     if not joining.any():
         return h
     member = h.lit & (h.labels >= 0)
