@@ -27,6 +27,7 @@ from ...pipeline.prepared import Prepared
 from ...solvers.segmentation import assign_to_regions, compact_regions, segment, split_modes, split_regions
 from .result import to_estimate
 from .shading import divide_shade, in_unit_dc
+from .thin import joined_to_regions
 from .values import FitContext, LightSource, ReflectionFits, Solution
 
 # a compact patch of A pixels (a square of side s) holds about (s - 1)^2 pixels wholly inside it;
@@ -102,19 +103,29 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
     ``interreflection``); where the clustered problem tied uniform regions, the regions are
     found again on the whole mesh under that light (parted again where the clustered problem
     parted them, :func:`.edges.parted_regions`; faces near a region in albedo join it, as in
-    :func:`.edges.tied_regions`) and each takes its faces' median albedo."""
+    :func:`.edges.tied_regions`) and each takes its faces' median albedo. Faces seen only beyond
+    ``min_cos_view`` then join those regions by the rule of the held solve's faces outside its
+    fit (:func:`.thin.joined_to_regions`, their radiance from all their rows), except under a
+    light from the coat's view changes, whose diffuse radiance their colours do not match;
+    ``info['outside_faces']`` counts them."""
     c, h, model = method.config, part.hypothesis, method.model
-    mesh, obs = prep.data.mesh, prep.obs
-    if part.level.any():   # the coat's level, in every view
-        obs = replace(obs, rgb=obs.rgb - part.level)
-        prep = replace(prep, obs=obs)
-    if part.coat is not None:
-        normals = mesh.face_normals[obs.face]
-        escapes = coat.mirror_escapes(obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
-        rows = part.coat.rows(normals, obs.view_dir, c.coat_ior, escapes)
-        obs = replace(obs, rgb=obs.rgb - part.coat.weight[0] * rows)   # one coat group: coat_per_region is not carried
-        prep = replace(prep, obs=obs)
-    f = mesh.num_faces
+    mesh, f = prep.data.mesh, prep.data.mesh.num_faces
+
+    def diffuse_part(o):
+        """``o`` with the coat's level and reflection subtracted from its colours."""
+        rgb = o.rgb - part.level
+        if part.coat is not None:
+            normals = mesh.face_normals[o.face]
+            escapes = coat.mirror_escapes(o.face, normals, o.view_dir, prep.sampling, prep.visibility)
+            # one coat group: coat_per_region is not carried
+            rgb = rgb - part.coat.weight[0] * part.coat.rows(normals, o.view_dir, c.coat_ior, escapes)
+        return replace(o, rgb=rgb)
+
+    if part.level.any() or part.coat is not None:
+        prep = replace(prep, obs=diffuse_part(prep.obs))
+    obs = prep.obs
+    # faces seen only beyond min_cos_view: no fit keeps their rows; they join the regions below
+    outside = prep.all_obs.observed_faces() & ~obs.observed_faces()
     radiance = group_quantile(obs.face, obs.rgb, f, c.retinex_quantile)
     if h.source.from_coat_map:   # the map's diffuse radiance, as the clusters' light was fitted to
         mapped = coat_map.diffuse_radiance(part.fits.coat_map, obs.face, obs.rgb, obs.view_dir, mesh.face_normals,
@@ -148,4 +159,11 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
         albedo[tied] = group_quantile(labels[tied], albedo[tied], regions, 0.5)[labels[tied]]
     whole = replace(h, radiance=radiance, albedo=albedo, lit=lit, labels=labels, regions=regions)
     ctx = FitContext(prep, c, model, method.loss, ReflectionFits(obs), edges, usable)
-    return to_estimate(ctx, whole, method)
+    if outside.any() and regions and not h.source.models_the_coat:
+        beyond = diffuse_part(prep.all_obs.subset(outside[prep.all_obs.face]))
+        seen = np.where(outside[:, None], group_quantile(beyond.face, beyond.rgb, f, c.retinex_quantile), radiance)
+        whole = joined_to_regions(ctx, replace(whole, radiance=seen), outside & sees_sky, shade)
+    est = to_estimate(ctx, whole, method)
+    est.info["outside_faces"] = {"thin": 0, "grazing": int(outside.sum()),
+                                 "joined": int(np.sum(whole.lit & outside))}
+    return est

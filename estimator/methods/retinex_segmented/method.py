@@ -151,7 +151,9 @@ class RetinexSegmented(Method):
         count = cluster_count(prep, c.light_faces, len(observed))
         if prep.streamed or (count < len(observed) and not carried(c)):
             # a cluster would merge a thin face's rows into its colour: on clusters they have none
-            return solve_on_clusters(self, prep.without_thin(), observed, count)
+            est = solve_on_clusters(self, prep.without_thin(), observed, count)
+            est.info["outside_faces"]["thin"] = 0 if thin is None else int(thin.sum())   # dropped, not joined
+            return est
         return self.solve_held(prep).estimate
 
     def solve_held(self, prep, keep_regions: bool = True) -> Solution:
@@ -283,8 +285,9 @@ class RetinexSegmented(Method):
             rgb = rgb - applied.weight[-1] * applied.rows(normals, view_dir, c.coat_ior, escapes)
         radiance = group_quantile(face, rgb, whole.obs.num_faces, c.retinex_quantile)
         ctx, _ = self._context(fitted, fits)
+        shade = chosen.shading.columns @ chosen.light + ctx.extra
         joined = joined_to_regions(ctx, replace(chosen, radiance=np.where(outside[:, None], radiance, chosen.radiance)),
-                                   outside & (fitted.c_matrix[:, 0] > 0))
+                                   outside & (fitted.c_matrix[:, 0] > 0), shade)
         count["joined"] = int(np.sum(joined.lit & ~chosen.lit))
         if not count["joined"]:
             return est

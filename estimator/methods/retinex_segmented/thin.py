@@ -10,7 +10,8 @@
   whose rows no fit keeps.
 
 The estimate is made without them, and they join its uniform regions under its light
-(:meth:`.method.RetinexSegmented.solve_held`)."""
+(:meth:`.method.RetinexSegmented.solve_held`; on clusters, whose merged rows leave thin faces
+none, the faces seen only at grazing angles join in :func:`.clusters.extend`)."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -38,10 +39,10 @@ def thin_faces(obs: Observations) -> np.ndarray | None:
     return thin if thin.any() and (rows & ~thin).any() else None
 
 
-def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray) -> Hypothesis:
+def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray, shade: np.ndarray) -> Hypothesis:
     """``h`` with the faces ``outside`` (F,) bool the fit left out (their radiance in
     ``h.radiance``) joined to its uniform regions: such a face lit under ``h``'s light (its
-    shading above the level of the fit's faces, :func:`.shading.lit_faces`) joins
+    shading ``shade`` (F, 3) above the level of the fit's faces, :func:`.shading.lit_faces`) joins
     the region that every one of its lit neighbours lies in (a texture's face counts as one
     more region) when that region is also the nearest to its own albedo, within the reach
     :func:`estimator.solvers.segmentation.assign_to_regions` gives a face near a region in
@@ -54,7 +55,6 @@ def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray) -> Hy
     textured development seeds. The fit's own faces keep their albedos, labels and lit flags."""
     if not outside.any() or not h.regions:
         return h
-    shade = h.shading.columns @ h.light + ctx.extra
     positive = np.all(np.isfinite(h.radiance) & (h.radiance > 0), axis=1)
     joining = lit_faces(shade, ctx.usable, outside & ~h.lit & positive)
     if not joining.any():
