@@ -189,15 +189,18 @@ class Prepared:
         return replace(self, obs=replace(self.obs.subset(keep), thin=None),
                        d_rows=None if self.d_rows is None else self.d_rows[keep], timings=dict(self.timings))
 
-    def without_thin(self) -> "Prepared":
+    def without_thin(self, keep_grazing: bool = False) -> "Prepared":
         """The problem without the rows of the thin faces (:attr:`Observations.thin`), kept or
         not, as if no pixel had unmixed them; as it is where no other face has a kept row
-        (they are then all there is to solve from)."""
+        (they are then all there is to solve from). ``keep_grazing``: a thin face without a kept
+        row (seen only beyond ``min_cos_view``) keeps its other rows, as a face seen only at
+        grazing angles does."""
         thin = self.all_obs.thin
         if thin is None or not np.any(~thin[self.obs.face]):
             return self
         kept = self.row_subset(~thin[self.obs.face])
-        return replace(kept, all_obs=replace(self.all_obs.subset(~thin[self.all_obs.face]), thin=None))
+        dropped = thin & self.obs.observed_faces() if keep_grazing else thin
+        return replace(kept, all_obs=replace(self.all_obs.subset(~dropped[self.all_obs.face]), thin=None))
 
     def clustered(self, cluster: np.ndarray, representative: np.ndarray) -> "Prepared":
         """The problem on clusters of faces, its rows held, as if each cluster were one face:

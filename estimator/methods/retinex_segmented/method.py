@@ -150,8 +150,9 @@ class RetinexSegmented(Method):
         observed = np.nonzero(prep.obs.observed_faces() & (True if thin is None else ~thin))[0]
         count = cluster_count(prep, c.light_faces, len(observed))
         if prep.streamed or (count < len(observed) and not carried(c)):
-            # a cluster would merge a thin face's rows into its colour: on clusters they have none
-            est = solve_on_clusters(self, prep.without_thin(), observed, count)
+            # a cluster would merge a thin face's kept rows into its colour: on clusters they have
+            # none; one seen only at grazing angles joins a region as the other such faces do
+            est = solve_on_clusters(self, prep.without_thin(keep_grazing=True), observed, count)
             est.info["outside_faces"]["thin"] = 0 if thin is None else int(thin.sum())   # dropped, not joined
             return est
         return self.solve_held(prep).estimate
@@ -185,6 +186,7 @@ class RetinexSegmented(Method):
         # the faces a view shows that the fit had no row of: thin faces, and faces seen only
         # beyond min_cos_view (their rows kept out of every fit)
         outside = whole.all_obs.observed_faces() & ~prep.obs.observed_faces()
+        est.info["outside_faces"] = {"thin": 0, "grazing": 0, "joined": 0}
         if outside.any() and not whole.merged_faces:   # clusters: extend() finds every face's albedo
             est = self._with_outside(whole, prep, fits, est, chosen, applied, level, outside)
         est.info["coat_level"] = level.tolist()

@@ -10,8 +10,9 @@
   whose rows no fit keeps.
 
 The estimate is made without them, and they join its uniform regions under its light
-(:meth:`.method.RetinexSegmented.solve_held`; on clusters, whose merged rows leave thin faces
-none, the faces seen only at grazing angles join in :func:`.clusters.extend`)."""
+(:meth:`.method.RetinexSegmented.solve_held`; on clusters, which would merge a thin face's
+kept rows and so drop them, the faces seen only at grazing angles, thin or not, join in
+:func:`.clusters.extend`)."""
 from __future__ import annotations
 
 from dataclasses import replace
