@@ -4,13 +4,15 @@ their unmixed footprints (``Observations.thin``) and join the default's estimate
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from estimator import MultiViewData, View, estimate
 from estimator.core.camera import Camera, look_at
-from estimator.methods.retinex_segmented.thin import thin_faces, unanimous_neighbour
+from estimator.methods.retinex_segmented.thin import joined_to_regions, thin_faces, unanimous_neighbour
+from estimator.methods.retinex_segmented.values import Hypothesis, LightSource, Shading
 from estimator.pipeline.observations import Observations, gather_observations
 from estimator.pipeline.prepared import prepare
 from estimator.rays.raycast import RayCaster
@@ -190,6 +192,27 @@ def test_a_face_joins_the_region_all_its_labelled_neighbours_share():
     labels = np.array([0, -1, 1, -1, -1])
     a, b = np.array([0, 1, 2, 3]), np.array([1, 2, 3, 4])
     np.testing.assert_array_equal(unanimous_neighbour(labels, a, b, 2), [-1, -1, -1, 1, -1])
+
+
+def test_faces_outside_the_fit_join_as_deep_as_their_region_reaches():
+    """A chain of 40 faces lit alike: faces 0-4 are fitted in region 0 (albedo 0.6), faces 35-39
+    in region 1 (0.2), the 30 between are outside the fit, the first 15 of region 0's colour and
+    the next 15 of region 1's. Each joins its own region however far from the fit it lies, and
+    the join stops at the border between the two, where the neighbours' region is not the face's
+    nearest."""
+    f = 40
+    albedo = np.where(np.arange(f) < 20, 0.6, 0.2)[:, None] * np.ones(3)
+    fitted = (np.arange(f) < 5) | (np.arange(f) >= 35)
+    labels = np.where(np.arange(f) < 5, 0, np.where(np.arange(f) >= 35, 1, -1))
+    shade = np.ones((f, 3))
+    h = Hypothesis(albedo * shade, np.ones((1, 3)), Shading(np.ones((f, 1))), np.where(fitted[:, None], albedo, 0.0),
+                   fitted, labels, 2, 1.0, LightSource.EDGES_AND_REGIONS, None)
+    ctx = SimpleNamespace(usable=fitted, edges=np.column_stack([np.arange(f - 1), np.arange(1, f)]),
+                          config=SimpleNamespace(segment_threshold=0.12))
+    joined = joined_to_regions(ctx, h, ~fitted, shade)
+    assert joined.lit.all()
+    np.testing.assert_array_equal(joined.labels, np.where(np.arange(f) < 20, 0, 1))
+    np.testing.assert_allclose(joined.albedo, albedo)
 
 
 def test_thin_faces_are_those_with_rows_unless_no_other_face_has_one():

@@ -25,10 +25,6 @@ from ...solvers.segmentation import albedo_features
 from .shading import in_unit_dc, lit_faces
 from .values import FitContext, Hypothesis
 
-# rounds of joining: a face whose neighbours are outside the fit too joins once they have (a
-# strip of slivers along a rim is a few faces deep); a bound on the cost, not a threshold
-MAX_ROUNDS = 8
-
 
 def thin_faces(obs: Observations) -> np.ndarray | None:
     """(F,) bool the thin faces with rows in ``obs`` (:attr:`Observations.thin`); None where
@@ -48,7 +44,9 @@ def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray, shade
     more region) when that region is also the nearest to its own albedo, within the reach
     :func:`estimator.solvers.segmentation.assign_to_regions` gives a face near a region in
     albedo, and takes that region's albedo; joined faces count as lit neighbours in the next
-    of :data:`MAX_ROUNDS` rounds. Both conditions, not one: a sliver along the border of two
+    round, until a round joins none (a strip of slivers along a rim, or a flank seen only at
+    grazing angles, is as deep as it is; each round joins at least one face, so there are at
+    most as many rounds as joining faces). Both conditions, not one: a sliver along the border of two
     regions has neighbours in both and a colour between them, and a strip of slivers across a
     border would carry a region over it round by round. A face that joins no region, or a
     hypothesis without regions (a texture), leaves it without an albedo: a thin face's own,
@@ -70,8 +68,9 @@ def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray, shade
     nearest[joining] = np.where(distance.min(axis=1) < 2.5 * ctx.config.segment_threshold,
                                 np.argmin(distance, axis=1), -1)
     labelled = np.where(h.lit, np.where(h.labels >= 0, h.labels, h.regions), -1)
-    a, b = ctx.edges[:, 0], ctx.edges[:, 1]
-    for _ in range(MAX_ROUNDS):
+    near = ctx.edges[joining[ctx.edges[:, 0]] | joining[ctx.edges[:, 1]]]   # every edge a joining face has
+    a, b = near[:, 0], near[:, 1]
+    while True:
         region = unanimous_neighbour(labelled, a, b, h.regions)
         new = joining & (labelled < 0) & (region >= 0) & (region < h.regions) & (nearest == region)
         if not new.any():
