@@ -241,7 +241,7 @@ def _first_fit_context(recorded: bool = True):
     data, _ = micro_scene(config, specular=0.0)
     prep = prepare(data, config)
     method = RetinexSegmented(config)
-    _, first = method._fit(prep, ReflectionFits(prep.obs))
+    _, first, _ = method._fit(prep, ReflectionFits(prep.obs))
     ctx = FitContext(prep, config, method.model, method.loss, ReflectionFits(prep.obs), prep.edges, first.lit,
                      method._edge_fit_arguments(), recorded=recorded)
     return first, ctx, data.mesh.centroids[:, 1] > 0.2
@@ -315,3 +315,48 @@ def test_only_the_first_fit_sees_the_colours_as_recorded(monkeypatch):
     info = RetinexSegmented(config).solve_held(prepare(data, config)).estimate.info
     assert info["coat_costs"] is not None and any(info["coat_level"])   # both refits ran
     assert calls[0] is True and len(calls) >= 3 and not any(calls[1:])
+
+
+def test_a_light_that_models_the_coat_is_weighed_again_against_the_corrected_fits(monkeypatch):
+    """Where the first fit keeps a light that models the coat, the cheapest hypothesis that does
+    not is corrected for the coat, and the kept light is judged beside those corrections in
+    the same call. Here the kept light is made a stand-in (the plain estimate relabelled as the
+    coat map's): it predicts as the uncorrected fit does, so it costs exactly as much, and the
+    coat added to the micro scene's colours makes a correction cheaper than both."""
+    from dataclasses import replace
+
+    from estimator.light.coat import mirror_escapes
+    from estimator.methods.retinex_segmented.method import RetinexSegmented
+    from estimator.methods.retinex_segmented.values import LightSource
+    from estimator.model.reflection import fresnel_dielectric
+    from estimator.pipeline.prepared import prepare
+
+    original = RetinexSegmented._fit
+
+    def first_keeps_the_map(self, prep, fits, found=None, labels=None, recorded=True):
+        est, h, plain = original(self, prep, fits, found, labels, recorded)
+        if not recorded:
+            return est, h, plain
+        stand_in = replace(est, info={**est.info, "light_from": LightSource.COAT_MAP_DIFFUSE.value})
+        return stand_in, replace(h, source=LightSource.COAT_MAP_DIFFUSE), (est, h)
+
+    monkeypatch.setattr(RetinexSegmented, "_fit", first_keeps_the_map)
+    config = micro_config()
+    data, _ = micro_scene(config, specular=0.0)
+    prep = prepare(data, config)
+    obs = prep.obs
+    normals = data.mesh.face_normals[obs.face]
+    reflection = 0.2 * fresnel_dielectric(np.sum(normals * obs.view_dir, axis=1), config.coat_ior) * mirror_escapes(
+        obs.face, normals, obs.view_dir, prep.sampling, prep.visibility)
+    prep = replace(prep, obs=replace(obs, rgb=obs.rgb + reflection[:, None]))
+    info = RetinexSegmented(config).solve_held(prep).estimate.info
+    costs = info["coat_costs"]
+    rival = LightSource.COAT_MAP_DIFFUSE.value
+    assert {"none", rival} <= set(costs) and len(costs) >= 3
+    assert costs[rival] == pytest.approx(costs["none"], rel=1e-12)
+    kept = min(costs, key=costs.get)
+    assert kept not in ("none", rival) and info["light_from"] != rival and info["coat_degree"] is not None
+
+    with_level = replace(config, coat_level=True)   # its refits judge the colours less a level: not weighed
+    info = RetinexSegmented(with_level).solve_held(prepare(data, with_level)).estimate.info
+    assert info["light_from"] == rival and info.get("coat_costs") is None

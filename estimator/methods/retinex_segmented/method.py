@@ -124,7 +124,10 @@ class RetinexSegmented(Method):
     light on the map's diffuse radiance (a texture) and, with ``reflected_lobe``, a shared
     Phong lobe's (:mod:`estimator.light.lobe_light`) are each turned into an estimate, and the
     one that best predicts the observations, at the Bayesian information criterion's price
-    per unknown, is kept (:mod:`.decision`); step 6 is skipped when it models the coat.
+    per unknown, is kept (:mod:`.decision`). Where the kept light models the coat, the
+    cheapest hypothesis that does not is corrected as in step 6 and the kept one weighed again
+    against those corrections by the same criterion (a light from the coat's view changes could
+    otherwise win against fits whose coat was not yet removed).
 
     7. The faces steps 1-6 had no row of (:mod:`.thin`: thin faces, which no pure pixel
        covers, their rows unmixed from pixels they share; faces seen only beyond
@@ -170,17 +173,23 @@ class RetinexSegmented(Method):
         if thin is not None:   # steps 1-6 without them; they join the estimate under its light
             prep = prep.row_subset(~thin[prep.obs.face])
         fits = ReflectionFits(prep.obs)   # the view-dependent fits, made on first need from these observations
-        est, chosen = self._fit(prep, fits)
+        est, chosen, plain = self._fit(prep, fits)
         self.log(f"light from {est.info['light_from']} ({est.info['uniform_regions']} uniform regions), "
                  f"{time.perf_counter() - t:.1f} s")
-        weight, applied, level = np.zeros((1, 3)), None, np.zeros(3)
-        if c.coat_correction and not LightSource(est.info["light_from"]).models_the_coat:
+        weight, applied, level, rival = np.zeros((1, 3)), None, np.zeros(3), None
+        if c.coat_correction and chosen.source.models_the_coat and plain is not None and not c.coat_level:
+            # weighed again against the cheapest other hypothesis once that is corrected for the coat
+            rival, (est, chosen) = (est, chosen), plain
+        if c.coat_correction and not chosen.source.models_the_coat:
             candidates = self._coat_candidates(prep, est)
+            if rival is not None and not candidates:   # nothing to correct: the first choice stands
+                (est, chosen), rival = rival, None
             if c.coat_level and candidates:   # a glossy layer's reflection is seen: its level too
                 prep, est, chosen, level = self._remove_level(prep, fits, est, chosen)
                 if level.any():   # the candidates again, on the colours less the level, under the new light
                     candidates = None
-            est, chosen, applied, prep = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates)
+            est, chosen, applied, prep = self._correct_coat(prep, fits, est, chosen, t, keep_regions, candidates,
+                                                            rival)
             if applied is not None:
                 weight = applied.weight
         # the faces a view shows that the fit had no row of: thin faces, and faces seen only
@@ -212,13 +221,14 @@ class RetinexSegmented(Method):
         if not found.level.any():
             return prep, est, chosen, found.level
         less = replace(prep, obs=replace(prep.obs, rgb=prep.obs.rgb - found.level))
-        refit, hypothesis = self._fit(less, fits, first_sun(chosen), recorded=False)
+        refit, hypothesis, _ = self._fit(less, fits, first_sun(chosen), recorded=False)
         if LightSource(refit.info["light_from"]).models_the_coat:
             return prep, est, chosen, np.zeros(3)
         return less, refit, hypothesis, found.level
 
     def _correct_coat(self, prep, fits: ReflectionFits, est: Estimate, chosen: Hypothesis, t: float,
-                      keep_regions: bool = True, candidates: list[tuple[CoatReflection, np.ndarray]] | None = None
+                      keep_regions: bool = True, candidates: list[tuple[CoatReflection, np.ndarray]] | None = None,
+                      rival: tuple[Estimate, Hypothesis] | None = None
                       ) -> tuple[Estimate, Hypothesis, CoatReflection | None, Prepared]:
         """Step 6: the coat's reflection of the environment's mean level (SH degree 0), of the
         light's low orders (``coat_order``) and, with ``coat_lobe``, a Phong lobe's
@@ -230,7 +240,9 @@ class RetinexSegmented(Method):
         coat's level where one was removed; each coat's reflection
         added back, one unknown per region's strength and two for the grey coat's shared
         colour: three with one group; the lobe's exponent one more). ``candidates``: those of
-        :meth:`_coat_candidates` on these colours under ``est`` (None: found here). Returns the
+        :meth:`_coat_candidates` on these colours under ``est`` (None: found here). ``rival``:
+        an estimate whose light models the coat, with its hypothesis, judged beside them as it
+        is (the first fit's choice, which ``est`` lost to before its correction). Returns the
         estimate kept, its hypothesis, the reflection subtracted before it (None: none) and the
         problem it was fitted on (``prep``, its colours less that reflection)."""
         c, obs = self.config, prep.obs
@@ -242,16 +254,22 @@ class RetinexSegmented(Method):
         found = first_sun(chosen)
         regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
         corrected = [replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)) for _, reflection in candidates]
-        fitted = [self._fit(less, fits, found, regions, False) for less in corrected]
+        fitted = [self._fit(less, fits, found, regions, False)[:2] for less in corrected]
+        rivals = [] if rival is None else [rival]
         # a coat's unknowns: its groups' strengths and two of the grey colour; a lobe's exponent one more
-        costs = prediction_cost(prep, [est] + [e for e, _ in fitted], [None] + [r for _, r in candidates],
-                                [0] + [len(np.unique(group)) + 2 + (r.exponent is not None) for r, _ in candidates])
+        costs = prediction_cost(prep, [est] + [e for e, _ in fitted + rivals],
+                                [None] + [r for _, r in candidates] + [None] * len(rivals),
+                                [0] + [len(np.unique(group)) + 2 + (r.exponent is not None) for r, _ in candidates]
+                                + [0] * len(rivals))
         best = int(np.argmin(costs))
-        named = {"none": float(costs[0]), **{coat_name(r): float(x) for (r, _), x in zip(candidates, costs[1:])}}
+        named = {"none": float(costs[0]), **{coat_name(r): float(x) for (r, _), x in zip(candidates, costs[1:])},
+                 **{h.source.value: float(costs[-1]) for _, h in rivals}}
         costs_text = ", ".join(f"{name} {cost:.1f}" for name, cost in named.items())
         self.log(f"coat's reflection: costs {costs_text}; {list(named)[best]} kept, {time.perf_counter() - t:.1f} s")
         applied = None
-        if best:
+        if best > len(candidates):
+            est, chosen = rival
+        elif best:
             (est, chosen), applied, prep = fitted[best - 1], candidates[best - 1][0], corrected[best - 1]
         est.info["coat_costs"] = named
         return est, chosen, applied, prep
@@ -346,19 +364,27 @@ class RetinexSegmented(Method):
         return dict(loss=self.loss, ridge=c.retinex_ridge, iterations=c.retinex_iterations,
                     max_edges=c.retinex_max_edges)
 
-    def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None,
-             labels: np.ndarray | None = None, recorded: bool = True) -> tuple[Estimate, Hypothesis]:
+    def _fit(self, prep, fits: ReflectionFits, found: sun.Sun | None = None, labels: np.ndarray | None = None,
+             recorded: bool = True) -> tuple[Estimate, Hypothesis, tuple[Estimate, Hypothesis] | None]:
         """Steps 1-5 on the observations of ``prep``; ``found``: the sun of an earlier fit
         (None: search for one when ``sun_min_gain`` < 1); ``labels``: an earlier fit's uniform
         regions, offered tied as they are (:func:`.edges.kept_regions`); ``recorded``: False
         where ``prep``'s colours are less a coat's reflection or level a refit subtracted (the
         parted regions' modes are then not sought, :func:`.edges.parted_regions`). Returns the
-        chosen estimate and its hypothesis."""
+        chosen estimate and its hypothesis, and where the chosen light models the coat, the
+        estimate and hypothesis of least cost among those that do not (None otherwise), its
+        record of the costs marking it chosen."""
         ctx, radiance = self._context(prep, fits, recorded)
         hypotheses = light_hypotheses(ctx, radiance, found, labels)
         estimates = [to_estimate(ctx, h, self) for h in hypotheses]
         best = choose(prep, hypotheses, estimates)
-        return estimates[best], hypotheses[best]
+        others = [i for i, h in enumerate(hypotheses) if not h.source.models_the_coat]
+        if not hypotheses[best].source.models_the_coat or not others:
+            return estimates[best], hypotheses[best], None
+        record = estimates[best].info["hypotheses"]
+        plain = min(others, key=lambda i: record[i]["cost"])
+        estimates[plain].info["hypotheses"] = [{**entry, "chosen": i == plain} for i, entry in enumerate(record)]
+        return estimates[best], hypotheses[best], (estimates[plain], hypotheses[plain])
 
     def _context(self, prep, fits: ReflectionFits, recorded: bool = True) -> tuple[FitContext, np.ndarray]:
         """What steps 1-5 read on the observations of ``prep`` (:class:`FitContext`: the usable
