@@ -103,7 +103,9 @@ def run_seed(seed: int, out: str) -> dict:
     row["coat_gap"] = max((c - row["within_10"] for c in chosen if c is not None), default=0.0)
     # the fits in the order they ran: the colours as recorded, then each coat's refit (named as
     # in run.json's coat_costs) where they match one to one (not with coat_level's extra refit)
-    coats = list(final.info.get("coat_costs") or {})[1:]
+    # (a light weighed again beside them, named by its source, is not a refit)
+    sources = {source.value for source in retinex_method.LightSource}
+    coats = [name for name in list(final.info.get("coat_costs") or {})[1:] if name not in sources]
     names = ["as recorded"] + [f"less the coat's {coat}" for coat in coats]
     if len(names) != len(fits):
         names = [f"fit {k}" for k in range(len(fits))]

@@ -322,7 +322,8 @@ def test_a_light_that_models_the_coat_is_weighed_again_against_the_corrected_fit
     not is corrected for the coat, and the kept light is judged beside those corrections in
     the same call. Here the kept light is made a stand-in (the plain estimate relabelled as the
     coat map's): it predicts as the uncorrected fit does, so it costs exactly as much, and the
-    coat added to the micro scene's colours makes a correction cheaper than both."""
+    coat added to the micro scene's colours makes a correction cheaper than both. Made the
+    cheapest (the cost patched), or with no reflection to try, the stand-in is kept as it is."""
     from dataclasses import replace
 
     from estimator.light.coat import mirror_escapes
@@ -357,6 +358,27 @@ def test_a_light_that_models_the_coat_is_weighed_again_against_the_corrected_fit
     kept = min(costs, key=costs.get)
     assert kept not in ("none", rival) and info["light_from"] != rival and info["coat_degree"] is not None
 
+    # the stand-in made the cheapest in that call: kept as it is, with no coat subtracted
+    import estimator.methods.retinex_segmented.method as method_module
+    cost = method_module.prediction_cost
+
+    def rival_cheapest(*args):
+        costs = cost(*args)
+        costs[-1] = costs.min() - 1.0
+        return costs
+
+    monkeypatch.setattr(method_module, "prediction_cost", rival_cheapest)
+    solution = RetinexSegmented(config).solve_held(prep)
+    assert solution.estimate.info["light_from"] == rival and solution.coat is None
+    assert min(solution.estimate.info["coat_costs"], key=solution.estimate.info["coat_costs"].get) == rival
+
+    # no coat's reflection worth trying: the first choice stands
+    monkeypatch.setattr(RetinexSegmented, "_coat_candidates", lambda self, prep, est: [])
+    solution = RetinexSegmented(config).solve_held(prep)
+    assert solution.estimate.info["light_from"] == rival and solution.coat is None
+    monkeypatch.undo()
+
     with_level = replace(config, coat_level=True)   # its refits judge the colours less a level: not weighed
+    monkeypatch.setattr(RetinexSegmented, "_fit", first_keeps_the_map)
     info = RetinexSegmented(with_level).solve_held(prepare(data, with_level)).estimate.info
     assert info["light_from"] == rival and info.get("coat_costs") is None

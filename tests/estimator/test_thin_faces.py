@@ -196,12 +196,12 @@ def test_a_face_joins_the_region_all_its_labelled_neighbours_share():
 
 def test_faces_outside_the_fit_join_as_deep_as_their_region_reaches():
     """A chain of 40 faces lit alike: faces 0-4 are fitted in region 0 (albedo 0.6), faces 35-39
-    in region 1 (0.2), the 30 between are outside the fit, the first 15 of region 0's colour and
-    the next 15 of region 1's. Each joins its own region however far from the fit it lies, and
-    the join stops at the border between the two, where the neighbours' region is not the face's
-    nearest."""
+    in region 1 (0.2), the 30 between are outside the fit, faces 5-12 of region 0's colour and
+    13-34 of region 1's. Each joins its own region however far from the fit it lies (21 rounds
+    from region 1), and region 0 stops where its colour ends, though face 13 has region 0's
+    neighbours alone for several rounds; face 13 then borders both regions and stays out."""
     f = 40
-    albedo = np.where(np.arange(f) < 20, 0.6, 0.2)[:, None] * np.ones(3)
+    albedo = np.where(np.arange(f) < 13, 0.6, 0.2)[:, None] * np.ones(3)
     fitted = (np.arange(f) < 5) | (np.arange(f) >= 35)
     labels = np.where(np.arange(f) < 5, 0, np.where(np.arange(f) >= 35, 1, -1))
     shade = np.ones((f, 3))
@@ -210,9 +210,10 @@ def test_faces_outside_the_fit_join_as_deep_as_their_region_reaches():
     ctx = SimpleNamespace(usable=fitted, edges=np.column_stack([np.arange(f - 1), np.arange(1, f)]),
                           config=SimpleNamespace(segment_threshold=0.12))
     joined = joined_to_regions(ctx, h, ~fitted, shade)
-    assert joined.lit.all()
-    np.testing.assert_array_equal(joined.labels, np.where(np.arange(f) < 20, 0, 1))
-    np.testing.assert_allclose(joined.albedo, albedo)
+    border = np.arange(f) == 13
+    np.testing.assert_array_equal(joined.lit, ~border)
+    np.testing.assert_array_equal(joined.labels, np.where(np.arange(f) < 13, 0, np.where(border, -1, 1)))
+    np.testing.assert_allclose(joined.albedo[~border], albedo[~border])
 
 
 def test_thin_faces_are_those_with_rows_unless_no_other_face_has_one():

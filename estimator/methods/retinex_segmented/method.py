@@ -125,9 +125,10 @@ class RetinexSegmented(Method):
     Phong lobe's (:mod:`estimator.light.lobe_light`) are each turned into an estimate, and the
     one that best predicts the observations, at the Bayesian information criterion's price
     per unknown, is kept (:mod:`.decision`). Where the kept light models the coat, the
-    cheapest hypothesis that does not is corrected as in step 6 and the kept one weighed again
-    against those corrections by the same criterion (a light from the coat's view changes could
-    otherwise win against fits whose coat was not yet removed).
+    cheapest hypothesis that does not is corrected as in step 6 and the kept one weighed again,
+    as it is, against that hypothesis uncorrected and corrected, by the same criterion (a light
+    from the coat's view changes could otherwise win against fits whose coat was not yet
+    removed); with ``coat_level`` step 6 is skipped there instead.
 
     7. The faces steps 1-6 had no row of (:mod:`.thin`: thin faces, which no pure pixel
        covers, their rows unmixed from pixels they share; faces seen only beyond
@@ -180,6 +181,7 @@ class RetinexSegmented(Method):
         if c.coat_correction and chosen.source.models_the_coat and plain is not None and not c.coat_level:
             # weighed again against the cheapest other hypothesis once that is corrected for the coat
             rival, (est, chosen) = (est, chosen), plain
+            self.log(f"{rival[1].source.value} weighed again against {chosen.source.value} corrected for the coat")
         if c.coat_correction and not chosen.source.models_the_coat:
             candidates = self._coat_candidates(prep, est)
             if rival is not None and not candidates:   # nothing to correct: the first choice stands
@@ -249,8 +251,8 @@ class RetinexSegmented(Method):
         candidates = self._coat_candidates(prep, est) if candidates is None else candidates
         group = coat_groups(est, c.coat_per_region)[0][obs.face]
         est.info["coat_costs"] = None
-        if not candidates:
-            return est, chosen, None, prep
+        if not candidates:   # nothing to correct: a rival, which the first fit chose, stands
+            return (*(rival or (est, chosen)), None, prep)
         found = first_sun(chosen)
         regions = chosen.labels if chosen.regions and keep_regions else None   # the first fit's, for each refit
         corrected = [replace(prep, obs=replace(obs, rgb=obs.rgb - reflection)) for _, reflection in candidates]

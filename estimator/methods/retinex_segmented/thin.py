@@ -45,8 +45,8 @@ def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray, shade
     :func:`estimator.solvers.segmentation.assign_to_regions` gives a face near a region in
     albedo, and takes that region's albedo; joined faces count as lit neighbours in the next
     round, until a round joins none (a strip of slivers along a rim, or a flank seen only at
-    grazing angles, is as deep as it is; each round joins at least one face, so there are at
-    most as many rounds as joining faces). Both conditions, not one: a sliver along the border of two
+    grazing angles, is as deep as it is; each round but the last joins at least one face, so
+    there are at most one more rounds than joining faces). Both conditions, not one: a sliver along the border of two
     regions has neighbours in both and a colour between them, and a strip of slivers across a
     border would carry a region over it round by round. A face that joins no region, or a
     hypothesis without regions (a texture), leaves it without an albedo: a thin face's own,
@@ -68,14 +68,19 @@ def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray, shade
     nearest[joining] = np.where(distance.min(axis=1) < 2.5 * ctx.config.segment_threshold,
                                 np.argmin(distance, axis=1), -1)
     labelled = np.where(h.lit, np.where(h.labels >= 0, h.labels, h.regions), -1)
+    # the rounds read only the joining faces and their neighbours, renumbered: each costs the
+    # edges of the joining faces, not the mesh
     near = ctx.edges[joining[ctx.edges[:, 0]] | joining[ctx.edges[:, 1]]]   # every edge a joining face has
-    a, b = near[:, 0], near[:, 1]
+    faces, local = np.unique(near, return_inverse=True)
+    a, b = local.reshape(near.shape).T
+    sub, want, goal = labelled[faces], joining[faces], nearest[faces]
     while True:
-        region = unanimous_neighbour(labelled, a, b, h.regions)
-        new = joining & (labelled < 0) & (region >= 0) & (region < h.regions) & (nearest == region)
+        region = unanimous_neighbour(sub, a, b, h.regions)
+        new = want & (sub < 0) & (region >= 0) & (region < h.regions) & (goal == region)
         if not new.any():
             break
-        labelled[new] = region[new]
+        sub[new] = region[new]
+    labelled[faces] = sub
     tied = joining & (labelled >= 0) & (labelled < h.regions)
     labels, albedo = h.labels.copy(), h.albedo.copy()
     labels[tied] = labelled[tied]
