@@ -46,12 +46,13 @@ def joined_to_regions(ctx: FitContext, h: Hypothesis, outside: np.ndarray, shade
     albedo, and takes that region's albedo; joined faces count as lit neighbours in the next
     round, until a round joins none (a strip of slivers along a rim, or a flank seen only at
     grazing angles, is as deep as it is; each round but the last joins at least one face, so
-    there are at most one more rounds than joining faces). Both conditions, not one: a sliver along the border of two
-    regions has neighbours in both and a colour between them, and a strip of slivers across a
-    border would carry a region over it round by round. A face that joins no region, or a
-    hypothesis without regions (a texture), leaves it without an albedo: a thin face's own,
-    unmixed from pixels its neighbours share, scored 1-3 dB below the fitted faces on the
-    textured development seeds. The fit's own faces keep their albedos, labels and lit flags."""
+    there is at most one round more than there are joining faces). Both conditions, not one: a
+    sliver along the border of two regions has neighbours in both and a colour between them,
+    and a strip of slivers across a border would carry a region over it round by round. A face
+    that joins no region, or a hypothesis without regions (a texture), leaves it without an
+    albedo: a thin face's own, unmixed from pixels its neighbours share, scored 1-3 dB below the
+    fitted faces on the textured development seeds. The fit's own faces keep their albedos,
+    labels and lit flags."""
     if not outside.any() or not h.regions:
         return h
     positive = np.all(np.isfinite(h.radiance) & (h.radiance > 0), axis=1)
