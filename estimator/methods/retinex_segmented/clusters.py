@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from ...core import sh
 from ...core.errors import InputError
 from ...core.reductions import group_quantile
-from ...light import coat, coat_map, indirect, sun
+from ...light import coat_map, indirect, sun
 from ...model.estimate import Estimate
 from ...pipeline.prepared import Prepared
 from ...solvers.segmentation import assign_to_regions, compact_regions, segment, split_modes, split_regions
@@ -112,13 +112,11 @@ def extend(method, prep: Prepared, part: Solution) -> Estimate:
     mesh, f = prep.data.mesh, prep.data.mesh.num_faces
 
     def diffuse_part(o):
-        """``o`` with the coat's level and reflection subtracted from its colours."""
+        """``o`` with the coat's level and reflection subtracted from its colours (one coat
+        group: ``coat_per_region`` is not carried)."""
         rgb = o.rgb - part.level
         if part.coat is not None:
-            normals = mesh.face_normals[o.face]
-            escapes = coat.mirror_escapes(o.face, normals, o.view_dir, prep.sampling, prep.visibility)
-            # one coat group: coat_per_region is not carried
-            rgb = rgb - part.coat.weight[0] * part.coat.rows(normals, o.view_dir, c.coat_ior, escapes)
+            rgb = rgb - part.coat.unregioned(o.face, o.view_dir, prep, c.coat_ior)
         return replace(o, rgb=rgb)
 
     if part.level.any() or part.coat is not None:

@@ -184,8 +184,6 @@ class RetinexSegmented(Method):
             self.log(f"{rival[1].source.value} weighed again against {chosen.source.value} corrected for the coat")
         if c.coat_correction and not chosen.source.models_the_coat:
             candidates = self._coat_candidates(prep, est)
-            if rival is not None and not candidates:   # nothing to correct: the first choice stands
-                (est, chosen), rival = rival, None
             if c.coat_level and candidates:   # a glossy layer's reflection is seen: its level too
                 prep, est, chosen, level = self._remove_level(prep, fits, est, chosen)
                 if level.any():   # the candidates again, on the colours less the level, under the new light
@@ -302,9 +300,7 @@ class RetinexSegmented(Method):
         face, view_dir = np.concatenate([own.face, beyond.face]), np.concatenate([own.view_dir, beyond.view_dir])
         rgb = np.concatenate([own.rgb, beyond.rgb]) - level
         if applied is not None:
-            normals = whole.data.mesh.face_normals[face]
-            escapes = coat.mirror_escapes(face, normals, view_dir, whole.sampling, whole.visibility)
-            rgb = rgb - applied.weight[-1] * applied.rows(normals, view_dir, c.coat_ior, escapes)
+            rgb = rgb - applied.unregioned(face, view_dir, whole, c.coat_ior)
         radiance = group_quantile(face, rgb, whole.obs.num_faces, c.retinex_quantile)
         ctx, _ = self._context(fitted, fits)
         shade = chosen.shading.columns @ chosen.light + ctx.extra

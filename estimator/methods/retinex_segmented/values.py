@@ -173,6 +173,14 @@ class CoatReflection:
             return coat.lobe_rows(normals, view_dir, self.light, [self.exponent], escapes)[0]
         return coat.coat_rows(normals, view_dir, self.light, self.order, ior, escapes if self.order == 0 else None)
 
+    def unregioned(self, face: np.ndarray, view_dir: np.ndarray, prep: Prepared, ior: float) -> np.ndarray:
+        """(N, 3) the reflection subtracted from observations of faces ``face`` (N,) seen along
+        ``view_dir`` (N, 3) that lie in no region of the fit: at the last coat group's weight,
+        the one the faces outside every region share (the only one without ``coat_per_region``)."""
+        normals = prep.data.mesh.face_normals[face]
+        escapes = coat.mirror_escapes(face, normals, view_dir, prep.sampling, prep.visibility)
+        return self.weight[-1] * self.rows(normals, view_dir, ior, escapes)
+
 
 @dataclass
 class Solution:
