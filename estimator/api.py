@@ -286,7 +286,7 @@ def _screen(prep: Prepared, est: Estimate, fitted: bool) -> dict[str, int]:
         own = specular_precision if est.config.components == "specular" else diffuse_precision
         code[screening.undetermined(est, own)] = 3
         rows = np.bincount(prep.obs.face, minlength=len(code))
-        code[(code == 0) & screening.contradicted(est, own, rows, prep.obs.thin)] = 4
+        code[(code == 0) & screening.contradicted(est, own, rows)] = 4
     if code.any():
         counts.update(screening.mark_unestimated(est, code))
         if not est.observed.any():

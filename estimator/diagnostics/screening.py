@@ -19,9 +19,7 @@ Five reasons, each a property of the data or of physics, none fitted to a scene:
   reject the albedo its region gave it. A face joined to a region by its neighbours whose
   colour is another region's is one such face; more often it is a face whose views the model
   misfits, where the object shades itself (its shadows and interreflections are what the
-  light's order and the shadow function's directions resolve least). A thin face (no pure
-  pixel covers it) is not judged by its rows, radiances unmixed from pixels its neighbours
-  share (:func:`contradicted`).
+  light's order and the shadow function's directions resolve least).
 * ``left out by the method``: the face has observations in kept views, but the method gave
   it no albedo (``bilinear-clustered`` leaves out faces whose median colour over the views is
   below ``min_brightness`` times the 95th percentile of the faces' medians, as in a point
@@ -87,25 +85,14 @@ def undetermined(est: Estimate, precision: np.ndarray) -> np.ndarray:
     return out
 
 
-def contradicted(est: Estimate, precision: np.ndarray, rows: np.ndarray, thin: np.ndarray | None = None) -> np.ndarray:
+def contradicted(est: Estimate, precision: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """(F,) bool faces that share their label with other faces, have observations (``rows``
     (F,) their count) and no inlier among them: ``precision`` (F, 3), the face's own precision
-    (:func:`trust.albedo_precision`, inlier rows only), is zero in every channel.
-
-    ``thin`` (F,) bool (None: none): the thin faces (:attr:`Observations.thin`: no pure pixel
-    covers them), which are not judged by their rows. Each row of such a face is a radiance
-    unmixed from pixels its neighbours share, with the unmixing's error in it; a method that
-    keeps them (``retinex-segmented``) leaves them out of every fit for that reason and joins
-    them to a region by their neighbours and their own colour. Judged by those rows, the thin
-    faces so joined on the random family's matte teapots were marked contradicted though their
-    region's albedo was theirs: on seed 1104, 563 of the 781 faces marked were thin, their
-    median relative residual 0.097 against the outlier bound of 0.035, and the 781 held
-    0.999 of their luminance within ±10 %."""
+    (:func:`trust.albedo_precision`, inlier rows only), is zero in every channel."""
     labels = np.where(est.observed, est.labels, -1)
     sizes = np.bincount(labels[labels >= 0], minlength=1)
     shared = (labels >= 0) & (sizes[np.maximum(labels, 0)] > 1)
-    judged = shared & (rows > 0) & np.all(precision <= 0, axis=1)
-    return judged if thin is None else judged & ~thin
+    return shared & (rows > 0) & np.all(precision <= 0, axis=1)
 
 
 def mark_unestimated(est: Estimate, code: np.ndarray) -> dict[str, int]:

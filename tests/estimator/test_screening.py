@@ -49,18 +49,6 @@ def test_a_region_face_whose_own_observations_all_reject_its_albedo_is_contradic
     np.testing.assert_array_equal(out, [False, False, True, False, False])
 
 
-def test_a_thin_face_is_not_judged_by_its_unmixed_rows():
-    """Faces 1 and 2 share a region and have no inlier row; face 2 is thin (its rows unmixed
-    from shared pixels), so only face 1 is contradicted."""
-    precision = np.full((4, 3), 2.0)
-    precision[1:3] = 0.0
-    rows = np.array([3, 3, 2, 4])
-    est = _estimate(np.full((4, 3), 0.5), labels=[0, 0, 0, 1])
-    thin = np.array([False, False, True, False])
-    np.testing.assert_array_equal(screening.contradicted(est, precision, rows, thin), [False, True, False, False])
-    np.testing.assert_array_equal(screening.contradicted(est, precision, rows), [False, True, True, False])
-
-
 def test_marked_faces_are_zero_unlabelled_and_counted():
     est = _estimate(np.full((3, 3), 0.4))
     counts = screening.mark_unestimated(est, np.array([0, 2, 3], np.int8))
