@@ -15,9 +15,10 @@ go to DIR/NAME.json. ``--set`` changes an estimator setting for every method (a 
 choice measured over the family); VALUE is read as JSON, else kept as text. A method that needs
 the true light (``known-illumination``: each face's albedo under the seed's ground-truth SH
 light, cut to ``sh_order``) is given it. That is no ceiling for the default: it adds neither
-the light the object reflects onto itself nor a sun's exact shadows (seed 1101, a matte teapot
-under a probe: 17.1 dB against the default's 46.5; seed 1108, a matte blob under three small
-lamps: 33.5 against 26.2).
+the light the object reflects onto itself nor a sun's exact shadows, and scores below the
+default where the object shades itself (seed 1101, a matte teapot under a probe: 17.1 dB
+against 46.5) and above it where the light itself is what the default misses (seed 1108, a
+matte blob under three small lamps: 33.5 against 26.2).
 """
 from __future__ import annotations
 
